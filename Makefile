@@ -1,0 +1,33 @@
+# One command sets up and renders the Cornell box; one sets up and runs the tests.
+# torch is installed first from the pinned CPU build, so pip never resolves a CUDA one.
+PY ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+SCENE ?= scenes/cornell/cornell.obj
+OUT ?= out/cornell.exr
+
+.PHONY: setup demo test bench clean
+
+$(BIN)/python:
+	$(PY) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+
+$(VENV)/.installed: $(BIN)/python pyproject.toml
+	$(BIN)/pip install --quiet torch==2.13.0
+	$(BIN)/pip install --quiet -e ".[test,bench]"
+	touch $@
+
+setup: $(VENV)/.installed
+
+demo: setup
+	mkdir -p $(dir $(OUT))
+	$(BIN)/python -m tracer $(SCENE) -o $(OUT)
+
+test: setup
+	$(BIN)/python -m pytest -q
+
+bench: setup
+	$(BIN)/python -m bench.throughput
+
+clean:
+	rm -rf $(VENV) out

@@ -1,0 +1,14 @@
+"""tracer: a CPU path tracer for path-guiding research.
+
+    scene = tracer.load_scene("scenes/cornell/cornell.obj", width=128, height=128)
+    result = tracer.render(scene, spp=64)
+    tracer.write_image("cornell.exr", result.image)
+"""
+from .errors import SceneError, SettingsError, TracerError
+from .imageio import read_image, write_image
+from .render import RenderResult, render, write_outputs
+from .scene import load_scene
+
+__version__ = "0.1.0"
+__all__ = ["load_scene", "render", "write_image", "read_image", "write_outputs", "RenderResult",
+           "TracerError", "SceneError", "SettingsError"]

@@ -1,0 +1,224 @@
+"""Light sources for next-event estimation: emissive triangles and the environment.
+
+Triangles are chosen in proportion to their power (luminance of Ke x area x pi), then a
+point is drawn uniformly by area. The environment is one more light, chosen with a
+probability in proportion to its power through the scene's bounding sphere; a constant
+environment is sampled uniformly over the sphere, a map by luminance x sin(theta) (2D CDF).
+
+Emission is one-sided: a triangle emits from the side of its counter-clockwise normal.
+All pdfs returned here are per unit solid angle at the receiving point.
+"""
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ._jit import jit
+from .sampling import (
+    INV_4PI,
+    build_distribution_1d,
+    build_distribution_2d,
+    distribution_2d_pdf,
+    sample_distribution_1d,
+    sample_distribution_2d,
+    sample_uniform_sphere,
+    sample_uniform_triangle,
+)
+
+ENV_NONE = 0
+ENV_CONSTANT = 1
+ENV_MAP = 2
+
+
+class Lights(NamedTuple):
+    """Arrays the kernels read. L emissive triangles, F triangles in all."""
+
+    tri: np.ndarray  # (L,) int64 triangle index of each emissive triangle
+    func: np.ndarray  # (L,) float64 selection weights (power)
+    cdf: np.ndarray  # (L+1,) float64
+    area: np.ndarray  # (L,) float64
+    normal: np.ndarray  # (L, 3) float64 unit CCW normal
+    radiance: np.ndarray  # (L, 3) float64 emitted radiance
+    light_of_tri: np.ndarray  # (F,) int64: emissive index of a triangle, -1 if it does not emit
+    p_env: float  # probability of choosing the environment
+    env_type: int  # ENV_NONE, ENV_CONSTANT, ENV_MAP
+    env_const: np.ndarray  # (3,) constant radiance
+    env_map: np.ndarray  # (H, W, 3) radiance, (1,1,3) zeros if no map
+    env_cond_func: np.ndarray  # 2D distribution tables over the map (u along columns)
+    env_cond_cdf: np.ndarray
+    env_marg_func: np.ndarray
+    env_marg_cdf: np.ndarray
+
+
+def luminance(rgb):
+    rgb = np.asarray(rgb)
+    return 0.2126 * rgb[..., 0] + 0.7152 * rgb[..., 1] + 0.0722 * rgb[..., 2]
+
+
+def build_lights(scene):
+    """Light tables for `scene` (a tracer.scene.Scene)."""
+    tri = scene.tri
+    emission = scene.materials.emission[scene.tri_material]
+    emissive = np.flatnonzero(np.any(emission > 0.0, axis=1))
+    cr = np.cross(tri[emissive, 1] - tri[emissive, 0], tri[emissive, 2] - tri[emissive, 0])
+    area2 = np.linalg.norm(cr, axis=1)
+    area = 0.5 * area2
+    normal = cr / np.maximum(area2, 1e-300)[:, None]
+    radiance = emission[emissive]
+    power = luminance(radiance) * area * math.pi
+    tri_power = float(power.sum())
+    light_of_tri = np.full(tri.shape[0], -1, dtype=np.int64)
+    light_of_tri[emissive] = np.arange(emissive.size)
+
+    env = scene.environment
+    env_type, env_power = ENV_NONE, 0.0
+    env_const = np.zeros(3)
+    env_map = np.zeros((1, 1, 3))
+    tables = build_distribution_2d(np.ones((1, 1)))
+    radius = 0.5 * float(np.linalg.norm(scene.bounds[1] - scene.bounds[0]))
+    if env is not None and env.image is not None:
+        env_type, env_map = ENV_MAP, np.ascontiguousarray(env.image, dtype=np.float64)
+        h, w = env_map.shape[:2]
+        sin_theta = np.sin(np.pi * (np.arange(h) + 0.5) / h)
+        tables = build_distribution_2d(luminance(env_map) * sin_theta[:, None])
+        mean_rad = float((luminance(env_map) * sin_theta[:, None]).sum() / max(sin_theta.sum() * w, 1e-300))
+        env_power = math.pi * radius * radius * math.pi * mean_rad
+    elif env is not None and env.radiance.max() > 0.0:
+        env_type, env_const = ENV_CONSTANT, env.radiance.astype(np.float64)
+        env_power = math.pi * radius * radius * math.pi * float(luminance(env_const))
+
+    if emissive.size == 0:
+        func, cdf = np.ones(1), np.array([0.0, 1.0])
+        p_env = 1.0
+    else:
+        func, cdf = build_distribution_1d(power if tri_power > 0 else np.ones_like(power))
+        p_env = env_power / (env_power + tri_power) if env_type != ENV_NONE else 0.0
+        if env_type != ENV_NONE:
+            p_env = min(max(p_env, 0.05), 0.95)  # neither strategy is ever starved
+    return Lights(
+        emissive.astype(np.int64),
+        func,
+        cdf,
+        area if emissive.size else np.ones(1),
+        normal if emissive.size else np.zeros((1, 3)),
+        radiance if emissive.size else np.zeros((1, 3)),
+        light_of_tri,
+        float(p_env),
+        int(env_type),
+        env_const,
+        env_map,
+        *tables,
+    )
+
+
+# --- Environment directions <-> map coordinates -------------------------------------------
+@jit
+def env_uv(d):
+    """Map coordinates (u, v) in [0,1)^2 of a world direction (+y up)."""
+    u = 0.5 + math.atan2(d[0], -d[2]) * (0.5 / math.pi)
+    v = math.acos(min(max(d[1], -1.0), 1.0)) / math.pi
+    return u - math.floor(u), v
+
+
+@jit
+def env_dir(u, v):
+    theta = math.pi * v
+    phi = 2.0 * math.pi * (u - 0.5)
+    st = math.sin(theta)
+    return (st * math.sin(phi), math.cos(theta), -st * math.cos(phi))
+
+
+@jit
+def env_radiance(lt, d):
+    """Radiance arriving from direction d (a ray that left the scene along d)."""
+    if lt.env_type == ENV_CONSTANT:
+        return lt.env_const[0], lt.env_const[1], lt.env_const[2]
+    if lt.env_type == ENV_MAP:
+        u, v = env_uv(d)
+        h = lt.env_map.shape[0]
+        w = lt.env_map.shape[1]
+        x = min(int(u * w), w - 1)
+        y = min(int(v * h), h - 1)
+        return lt.env_map[y, x, 0], lt.env_map[y, x, 1], lt.env_map[y, x, 2]
+    return 0.0, 0.0, 0.0
+
+
+@jit
+def env_pdf(lt, d):
+    """Solid-angle pdf of choosing the environment and then direction d."""
+    if lt.env_type == ENV_CONSTANT:
+        return lt.p_env * INV_4PI
+    if lt.env_type == ENV_MAP:
+        u, v = env_uv(d)
+        st = math.sin(math.pi * v)
+        if st <= 0.0:
+            return 0.0
+        p = distribution_2d_pdf(lt.env_cond_func, lt.env_cond_cdf, lt.env_marg_func, lt.env_marg_cdf, u, v)
+        return lt.p_env * p / (2.0 * math.pi * math.pi * st)
+    return 0.0
+
+
+# --- Triangle lights ------------------------------------------------------------------------
+@jit
+def triangle_emission(lt, tri_index, wo_dot_n):
+    """Radiance leaving emissive triangle `tri_index` toward a viewer with dot(w_to_viewer, n_ccw)."""
+    li = lt.light_of_tri[tri_index]
+    if li < 0 or wo_dot_n <= 0.0:
+        return 0.0, 0.0, 0.0
+    return lt.radiance[li, 0], lt.radiance[li, 1], lt.radiance[li, 2]
+
+
+@jit
+def triangle_light_pdf(lt, tri_index, dist2, cos_light):
+    """Solid-angle pdf that NEE picks a point of triangle `tri_index` seen at dist^2, |cos|."""
+    li = lt.light_of_tri[tri_index]
+    if li < 0 or cos_light <= 0.0:
+        return 0.0
+    p_sel = (1.0 - lt.p_env) * (lt.cdf[li + 1] - lt.cdf[li])
+    return p_sel * dist2 / (lt.area[li] * cos_light)
+
+
+@jit
+def sample_light(lt, tri, x, u_sel, u0, u1):
+    """Pick a light and a point on it as seen from x.
+
+    Returns (wi, dist, radiance rgb, pdf): wi the unit world direction from x, dist the
+    distance to the point (np.inf for the environment), pdf per unit solid angle including
+    the choice of light; pdf = 0 when the sample carries no light (back side, degenerate).
+    """
+    if u_sel < lt.p_env:
+        # The environment
+        if lt.env_type == ENV_CONSTANT:
+            wi = sample_uniform_sphere(u0, u1)
+            pdf = lt.p_env * INV_4PI
+            return wi, np.inf, (lt.env_const[0], lt.env_const[1], lt.env_const[2]), pdf
+        su, sv, p = sample_distribution_2d(
+            lt.env_cond_func, lt.env_cond_cdf, lt.env_marg_func, lt.env_marg_cdf, u0, u1
+        )
+        st = math.sin(math.pi * sv)
+        if st <= 0.0 or p <= 0.0:
+            return (0.0, 0.0, 1.0), np.inf, (0.0, 0.0, 0.0), 0.0
+        wi = env_dir(su, sv)
+        rad = env_radiance(lt, wi)
+        return wi, np.inf, rad, lt.p_env * p / (2.0 * math.pi * math.pi * st)
+    # A triangle, by power, then a point by area
+    u = (u_sel - lt.p_env) / (1.0 - lt.p_env)
+    _, _, li = sample_distribution_1d(lt.func, lt.cdf, min(u, 1.0 - 1e-12))
+    t = lt.tri[li]
+    b1, b2 = sample_uniform_triangle(u0, u1)
+    b0 = 1.0 - b1 - b2
+    py = b0 * tri[t, 0, 0] + b1 * tri[t, 1, 0] + b2 * tri[t, 2, 0]
+    pyy = b0 * tri[t, 0, 1] + b1 * tri[t, 1, 1] + b2 * tri[t, 2, 1]
+    pz = b0 * tri[t, 0, 2] + b1 * tri[t, 1, 2] + b2 * tri[t, 2, 2]
+    dx, dy, dz = py - x[0], pyy - x[1], pz - x[2]
+    d2 = dx * dx + dy * dy + dz * dz
+    if d2 <= 0.0:
+        return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0
+    dist = math.sqrt(d2)
+    wi = (dx / dist, dy / dist, dz / dist)
+    cos_l = -(wi[0] * lt.normal[li, 0] + wi[1] * lt.normal[li, 1] + wi[2] * lt.normal[li, 2])
+    if cos_l <= 0.0:
+        return wi, dist, (0.0, 0.0, 0.0), 0.0
+    p_sel = (1.0 - lt.p_env) * (lt.cdf[li + 1] - lt.cdf[li])
+    pdf = p_sel * d2 / (lt.area[li] * cos_l)
+    return wi, dist, (lt.radiance[li, 0], lt.radiance[li, 1], lt.radiance[li, 2]), pdf

@@ -1,0 +1,201 @@
+"""The library entry point: `render(scene, spp=..., guide="bsdf", ...) -> RenderResult`.
+
+A render runs as passes over the whole image; each pass renders some samples per pixel
+in waves of at most `wave_size` paths (memory stays flat with image size). Between passes a
+callback may look at the film (guides learn there). With `time=S` the passes continue,
+doubling in size, until the next one would not fit in the budget. Ctrl-C stops the render
+between waves and returns what was rendered so far.
+"""
+import json
+import math
+import os
+import time as _time
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+
+from .bvh import make_accel
+from .errors import SettingsError
+from .film import Film
+from .guiding import make_guide
+from .integrator import Stats, WaveBuffers, trace_wave
+from .lights import build_lights
+
+DEFAULT_WAVE = 1 << 18
+
+
+@dataclass
+class RenderResult:
+    """image (H,W,3) float32 mean radiance; variance (H,W,3) float32 variance of that mean;
+    aovs {albedo (H,W,3), normal (H,W,3), depth (H,W,1)} float32; stats (dict, JSON-ready)."""
+
+    image: np.ndarray
+    variance: np.ndarray
+    aovs: dict
+    stats: dict
+    film: Film = field(repr=False)
+
+    def __repr__(self):
+        s = self.stats
+        return (f"RenderResult({self.image.shape[1]}x{self.image.shape[0]}, {s['spp']} spp, "
+                f"{s['time_total']:.2f} s, {s['msamples_per_s']:.2f} Msamples/s)")
+
+
+class _Context:
+    """What the wave kernels need, gathered once per render."""
+
+    def __init__(self, scene, accel, lights, seed, max_depth, rr_depth):
+        self.scene, self.accel, self.lights = scene, accel, lights
+        self.cam = scene.camera.packed()
+        self.seed = int(seed)
+        self.max_depth = int(max_depth)
+        self.rr_depth = int(rr_depth)
+        # Ray offset: scaled to the scene, well above float32's resolution at its size
+        extent = float(np.abs(scene.bounds).max())
+        self.eps = 1e-5 * max(accel.scale, extent)
+
+
+def _int_setting(name, value, lo):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
+        raise SettingsError(f"{name} must be an integer >= {lo}, got {value!r}")
+    return int(value)
+
+
+def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=None, seed=None,
+           accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
+           guide_settings=None):
+    """Render `scene` (from tracer.load_scene) and return a RenderResult.
+
+    spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
+    time       wall-clock budget in seconds for the whole render (instead of spp)
+    guide      registered sampler name ("bsdf"); guide_settings: dict of its settings
+    max_depth, rr_depth, seed: override the scene's render settings (Mitsuba conventions)
+    accel      "embree" or "numba"; threads: worker threads (default: all cores)
+    callback   f(pass_index, film, stats_dict) called after every pass; return False to stop
+    """
+    rs = scene.render
+    max_depth = rs.max_depth if max_depth is None else max_depth
+    rr_depth = rs.rr_depth if rr_depth is None else rr_depth
+    seed = rs.seed if seed is None else seed
+    if isinstance(max_depth, bool) or not isinstance(max_depth, (int, np.integer)) or (max_depth < 1 and max_depth != -1):
+        raise SettingsError(f"max_depth must be -1 (unlimited) or >= 1, got {max_depth!r}")
+    rr_depth = _int_setting("rr_depth", rr_depth, 1)
+    seed = _int_setting("seed", seed, 0)
+    wave_size = _int_setting("wave_size", wave_size, 1)
+    if time is None:
+        spp = _int_setting("spp", rs.spp if spp is None else spp, 1)
+    elif not (isinstance(time, (int, float)) and math.isfinite(time) and time > 0):
+        raise SettingsError(f"time must be a positive number of seconds, got {time!r}")
+    g = make_guide(guide, **(guide_settings or {}))
+    if g is not None:  # no guide can be registered before the guiding framework lands
+        raise SettingsError(f"guide {guide!r} is not supported by this integrator yet")
+    if threads is not None:
+        threads = _int_setting("threads", threads, 1)
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    n_threads = threads or numba.config.NUMBA_NUM_THREADS
+
+    t_start = _time.perf_counter()
+    acc = make_accel(accel, scene.tri, threads=n_threads)
+    lights = build_lights(scene)
+    t_setup = _time.perf_counter() - t_start
+    ctx = _Context(scene, acc, lights, seed, max_depth, rr_depth)
+    film = Film(scene.width, scene.height)
+    npix = film.n_pixels
+    buf = WaveBuffers(min(wave_size, npix * (spp if time is None else 1024)))
+    stats = Stats()
+    passes = []
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=spp if time is None else None, unit="spp", desc="render", leave=False,
+                   bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} spp [{elapsed}<{remaining}]"
+                   if time is None else "{desc}: {n_fmt} spp [{elapsed}, budget %gs]" % time)
+    interrupted = False
+    sample0 = 0
+    pass_spp = 1
+    t_render = _time.perf_counter()
+    try:
+        for pass_index in range(1 << 30):  # bounded by spp or time below
+            if time is None:
+                if sample0 >= spp:
+                    break
+                pass_spp = min(pass_spp, spp - sample0)
+            else:
+                elapsed = _time.perf_counter() - t_start
+                if passes:
+                    per_spp = sum(p["time"] for p in passes) / sample0
+                    fit = int((time - elapsed) / per_spp)
+                    pass_spp = min(pass_spp, fit)
+                    if pass_spp < 1:
+                        break
+            tp = _time.perf_counter()
+            total = pass_spp * npix
+            for g0 in range(0, total, buf.size):
+                trace_wave(ctx, buf, film, sample0, g0, min(buf.size, total - g0), stats)
+                if bar is not None:
+                    bar.update(0)
+            sample0 += pass_spp
+            passes.append({"spp": pass_spp, "time": _time.perf_counter() - tp})
+            if bar is not None:
+                bar.update(pass_spp)
+            if callback is not None and callback(pass_index, film, _stats(stats, passes, sample0, t_setup, t_render, acc, n_threads, scene, seed, max_depth, rr_depth, guide)) is False:
+                break
+            pass_spp *= 2
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        if bar is not None:
+            bar.close()
+    st = _stats(stats, passes, sample0, t_setup, t_render, acc, n_threads, scene, seed, max_depth, rr_depth, guide)
+    st["interrupted"] = interrupted
+    image = film.mean().astype(np.float32)
+    variance = film.variance().astype(np.float32)
+    return RenderResult(image, variance, film.aovs(), st, film)
+
+
+def _stats(stats, passes, spp, t_setup, t_render, acc, threads, scene, seed, max_depth, rr_depth, guide):
+    elapsed = _time.perf_counter() - t_render
+    samples = stats.samples
+    return {
+        "scene": os.path.abspath(scene.path),
+        "width": scene.width,
+        "height": scene.height,
+        "spp": int(spp),
+        "passes": passes,
+        "samples": int(samples),
+        "rays": int(stats.rays + stats.shadow_rays),
+        "camera_and_bounce_rays": int(stats.rays),
+        "shadow_rays": int(stats.shadow_rays),
+        "time_setup": t_setup,
+        "time_total": elapsed,
+        "time_stages": dict(stats.time),
+        "msamples_per_s": samples / elapsed / 1e6 if elapsed > 0 else 0.0,
+        "mrays_per_s": (stats.rays + stats.shadow_rays) / elapsed / 1e6 if elapsed > 0 else 0.0,
+        "nonfinite_samples": int(stats.nonfinite),
+        "accel": acc.name,
+        "threads": int(threads),
+        "seed": int(seed),
+        "max_depth": int(max_depth),
+        "rr_depth": int(rr_depth),
+        "guide": guide,
+        "guide_memory_bytes": 0,
+        "guide_time_learning": 0.0,
+    }
+
+
+def write_outputs(result, path):
+    """Write `path` (EXR), a PNG preview and a stats JSON beside it; returns the three paths."""
+    from .imageio import write_image
+
+    base, ext = os.path.splitext(os.fspath(path))
+    if ext.lower() != ".exr":
+        raise SettingsError(f"{path}: output must be an .exr file (a PNG and a JSON are written beside it)")
+    write_image(path, result.image)
+    png = base + ".png"
+    write_image(png, result.image)
+    js = base + ".json"
+    with open(js, "w", encoding="utf-8") as f:
+        json.dump(result.stats, f, indent=1)
+    return path, png, js

@@ -1,0 +1,84 @@
+"""Counter-based random numbers: u = hash(seed, pixel, sample index, dimension).
+
+There is no generator state. Each path keeps one 64-bit key, `path_key(seed, pixel, sample)`,
+and draws dimension d as `uniform(key, d)`. A render is therefore the same whatever the batch
+size, wave size or thread count, and any path can be replayed (gradient-domain random replay,
+PSS warps that replace the first dimensions of the stream, `--pixel` debugging).
+
+The dimension layout is this table, and nothing else in the code hard-codes a dimension:
+
+    dim                       what
+    0, 1                      position inside the pixel (x, y)
+    BOUNCE + B*k + 0, 1       bounce k: direction (BSDF or guide sample)
+    BOUNCE + B*k + 2          bounce k: lobe choice inside the BSDF
+    BOUNCE + B*k + 3          bounce k: strategy choice (BSDF or guide, one-sample MIS)
+    BOUNCE + B*k + 4          bounce k: light choice for next-event estimation
+    BOUNCE + B*k + 5, 6       bounce k: position on the chosen light
+    BOUNCE + B*k + 7          bounce k: Russian roulette
+
+with BOUNCE = 2 and B = 8; bounce k = 0 is the first surface the camera ray hits.
+"""
+import numpy as np
+from numba import prange
+
+from ._jit import jit, kernel
+
+DIM_PIXEL = 0
+BOUNCE = 2
+BLOCK = 8
+DIR = 0
+LOBE = 2
+STRATEGY = 3
+LIGHT = 4
+LIGHT_POS = 5
+RR = 7
+
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_S30 = np.uint64(30)
+_S27 = np.uint64(27)
+_S31 = np.uint64(31)
+_S11 = np.uint64(11)
+_INV53 = 1.0 / 9007199254740992.0  # 2^-53
+
+
+@jit
+def mix64(x):
+    """SplitMix64 finaliser: a bijective avalanche of a 64-bit integer."""
+    x = (x ^ (x >> _S30)) * _M1
+    x = (x ^ (x >> _S27)) * _M2
+    return x ^ (x >> _S31)
+
+
+@jit
+def path_key(seed, pixel, sample):
+    """The key of one path: a hash of (seed, pixel index, sample index)."""
+    k = mix64(np.uint64(seed) * _GOLDEN + np.uint64(1))
+    k = mix64(k ^ (np.uint64(pixel) * _M2 + np.uint64(1)))
+    return mix64(k ^ (np.uint64(sample) * _M1 + _GOLDEN))
+
+
+@jit
+def uniform(key, dim):
+    """The path's random number in dimension `dim`, a float64 in [0, 1)."""
+    h = mix64(key ^ ((np.uint64(dim) + np.uint64(1)) * _GOLDEN))
+    return float(h >> _S11) * _INV53
+
+
+@jit
+def bounce_dim(depth, slot):
+    """Dimension of `slot` (DIR, LOBE, ...) at bounce `depth` (0 = first hit)."""
+    return BOUNCE + BLOCK * depth + slot
+
+
+@kernel
+def uniform_batch(seed, pixel, sample, dims):
+    """u (n, len(dims)) float64 for paths (pixel[i], sample[i]); for tests and experiments."""
+    n = pixel.shape[0]
+    out = np.empty((n, dims.shape[0]))
+    for i in prange(n):
+        key = path_key(seed, pixel[i], sample[i])
+        for j in range(dims.shape[0]):
+            out[i, j] = uniform(key, dims[j])
+    return out
