@@ -19,7 +19,7 @@ def srgb_encode(linear):
 
 
 def write_image(path, array, channel_names=None):
-    """Write an (H, W), (H, W, 1), (H, W, 3) or (H, W, 4) array to `path`.
+    """Write an (H, W) or (H, W, C) array to `path` (C <= 4 for 8-bit formats).
 
     The format follows the extension: `.exr` (and other float formats) get linear float32,
     anything else 8-bit sRGB. Raises TracerError naming the path if it cannot be written.
@@ -30,12 +30,12 @@ def write_image(path, array, channel_names=None):
     a = np.asarray(array, dtype=np.float32)
     if a.ndim == 2:
         a = a[:, :, None]
-    if a.ndim != 3 or a.shape[2] not in (1, 2, 3, 4):
+    ext = os.path.splitext(path)[1].lower()
+    if a.ndim != 3 or (ext not in _FLOAT_EXTS and a.shape[2] not in (1, 2, 3, 4)):
         raise TracerError(f"{path}: cannot write an array of shape {np.shape(array)} as an image")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise TracerError(f"{path}: cannot write output, folder {folder} does not exist")
-    ext = os.path.splitext(path)[1].lower()
     h, w, c = a.shape
     if ext in _FLOAT_EXTS:
         spec = oiio.ImageSpec(w, h, c, "float")

@@ -123,12 +123,18 @@ def sample_uniform_triangle(u0, u1):
 # --- Multiple importance sampling ----------------------------------------------------------
 @jit
 def power_heuristic(pdf_a, pdf_b):
-    """MIS weight of strategy a against b (power 2); 0 when both densities are 0."""
-    a2 = pdf_a * pdf_a
-    b2 = pdf_b * pdf_b
-    if a2 + b2 <= 0.0 or math.isinf(a2):
-        return 1.0 if math.isinf(a2) else 0.0
-    return a2 / (a2 + b2)
+    """MIS weight of strategy a against b (power 2); 0 when both densities are 0.
+
+    Written with the ratio of the two pdfs so that neither huge (1e200) nor tiny (1e-200)
+    densities overflow or underflow when squared.
+    """
+    if pdf_a >= pdf_b:
+        if pdf_a <= 0.0:
+            return 0.0
+        r = pdf_b / pdf_a if math.isfinite(pdf_a) else 0.0
+        return 1.0 / (1.0 + r * r)
+    r = pdf_a / pdf_b if math.isfinite(pdf_b) else 0.0
+    return r * r / (1.0 + r * r)
 
 
 # --- Piecewise-constant distributions -------------------------------------------------------

@@ -1,0 +1,42 @@
+"""Statistical assertions shared by the tests: z-tests with Sidak-corrected levels."""
+import numpy as np
+from scipy import stats
+
+ALPHA = 0.01  # family-wise false-failure rate of one test function
+
+
+def sidak(alpha, n_tests):
+    """Per-test level so that n independent tests together fail with probability alpha."""
+    return 1.0 - (1.0 - alpha) ** (1.0 / n_tests)
+
+
+def z_critical(alpha, n_tests=1):
+    return float(stats.norm.isf(sidak(alpha, n_tests) / 2.0))
+
+
+def assert_z(estimate, variance, expected, n_tests=1, alpha=ALPHA, what="estimate"):
+    """Two-sided z-test of estimate(s) against expected with the given variance(s) of the estimate."""
+    est = np.atleast_1d(np.asarray(estimate, dtype=np.float64))
+    var = np.atleast_1d(np.asarray(variance, dtype=np.float64))
+    exp = np.broadcast_to(np.asarray(expected, dtype=np.float64), est.shape)
+    assert np.all(var > 0), f"{what}: variance must be positive to test, got {var}"
+    z = (est - exp) / np.sqrt(var)
+    zc = z_critical(alpha, max(n_tests, est.size))
+    worst = int(np.argmax(np.abs(z)))
+    assert np.all(np.abs(z) < zc), (
+        f"{what}: |z| = {abs(z[worst]):.2f} >= {zc:.2f} at {worst}: got {est[worst]:.6g}, "
+        f"expected {exp[worst]:.6g} +- {np.sqrt(var[worst]):.3g}"
+    )
+    return z
+
+
+def image_mean(result, mask=None):
+    """Mean over pixels (per channel) and the variance of that mean, from a RenderResult."""
+    img = result.image.astype(np.float64)
+    var = result.variance.astype(np.float64)
+    if mask is not None:
+        img, var = img[mask], var[mask]
+    else:
+        img, var = img.reshape(-1, 3), var.reshape(-1, 3)
+    n = img.shape[0]
+    return img.mean(axis=0), var.sum(axis=0) / (n * n)

@@ -1,0 +1,117 @@
+"""Render-level properties: determinism, the random stream, the film, time budgets."""
+import numba
+import numpy as np
+import pytest
+from scipy import stats
+
+import tracer
+from tracer import rng
+from tracer.film import Film
+from tests.reference import CORNELL, REF_SIZE, load
+from tests.stats import z_critical
+
+
+@pytest.fixture(scope="module")
+def small_cornell():
+    return tracer.load_scene(CORNELL, width=24, height=20)
+
+
+def test_same_seed_is_bit_identical_across_wave_sizes_and_threads(small_cornell):
+    base = tracer.render(small_cornell, spp=6, seed=3, wave_size=1 << 18)
+    n0 = numba.get_num_threads()
+    try:
+        for wave, threads in [(97, 1), (480, 2), (4096, 1)]:
+            r = tracer.render(small_cornell, spp=6, seed=3, wave_size=wave, threads=threads)
+            np.testing.assert_array_equal(r.image, base.image)
+            np.testing.assert_array_equal(r.variance, base.variance)
+    finally:
+        numba.set_num_threads(n0)
+    other = tracer.render(small_cornell, spp=6, seed=4)
+    assert np.any(other.image != base.image)
+
+
+def test_spp_in_passes_equals_one_render(small_cornell):
+    # Passes add samples in index order: 1+1+2+2 spp by passes equals 6 spp in one go.
+    r = tracer.render(small_cornell, spp=6, seed=1)
+    assert [p["spp"] for p in r.stats["passes"]] == [1, 2, 3]
+    one = tracer.render(small_cornell, spp=6, seed=1, wave_size=10**7)
+    np.testing.assert_array_equal(r.image, one.image)
+
+
+def test_accels_give_the_same_image(small_cornell):
+    a = tracer.render(small_cornell, spp=4, accel="embree")
+    b = tracer.render(small_cornell, spp=4, accel="numba")
+    # Same random numbers; only float32-vs-float64 hit points differ, so nearly all pixels match.
+    close = np.isclose(a.image, b.image, rtol=1e-3, atol=1e-5).all(axis=2)
+    assert close.mean() > 0.97, close.mean()
+
+
+def test_time_budget_is_honoured(small_cornell):
+    tracer.render(small_cornell, spp=1)  # compile outside the budget
+    r = tracer.render(small_cornell, time=0.5)
+    assert r.stats["spp"] >= 1 and r.stats["time_total"] < 1.5
+    assert np.all(np.isfinite(r.image))
+
+
+def test_callback_runs_between_passes_and_can_stop(small_cornell):
+    seen = []
+
+    def cb(i, film, st):
+        seen.append((i, st["spp"]))
+        return i < 1
+
+    r = tracer.render(small_cornell, spp=64, callback=cb)
+    assert seen == [(0, 1), (1, 3)] and r.stats["spp"] == 3
+
+
+def test_random_stream_is_uniform_and_replayable():
+    n = 200_000
+    pix = np.arange(n, dtype=np.int64) % 1000
+    smp = np.arange(n, dtype=np.int64) // 1000
+    dims = np.array([0, 1, rng.bounce_dim(0, rng.DIR), rng.bounce_dim(7, rng.RR)], dtype=np.int64)
+    u = rng.uniform_batch(5, pix, smp, dims)
+    assert u.min() >= 0.0 and u.max() < 1.0
+    # each dimension uniform (chi-square on 50 bins), pairs of dimensions independent (2D grid)
+    zc = 4  # number of tests below
+    level = 1 - (1 - 0.01) ** (1 / zc)
+    for j in range(2):
+        counts = np.histogram(u[:, j], bins=50, range=(0, 1))[0]
+        assert stats.chisquare(counts).pvalue > level
+    grid = np.histogram2d(u[:, 0], u[:, 2], bins=15, range=[[0, 1], [0, 1]])[0].ravel()
+    assert stats.chisquare(grid).pvalue > level
+    grid = np.histogram2d(u[:, 1], u[:, 3], bins=15, range=[[0, 1], [0, 1]])[0].ravel()
+    assert stats.chisquare(grid).pvalue > level
+    # replay in reverse order gives the same numbers
+    u2 = rng.uniform_batch(5, pix[::-1].copy(), smp[::-1].copy(), dims)
+    np.testing.assert_array_equal(u2[::-1], u)
+    assert np.any(rng.uniform_batch(6, pix, smp, dims) != u)
+
+
+def test_film_mean_and_variance_match_numpy():
+    g = np.random.default_rng(0)
+    film = Film(3, 2)
+    pix = np.repeat(np.arange(6), 10)
+    rad = g.normal(size=(60, 3)) + 1
+    film.add(pix.astype(np.int64), rad, np.zeros((60, 7)))
+    m = rad.reshape(6, 10, 3).mean(axis=1)
+    v = rad.reshape(6, 10, 3).var(axis=1, ddof=1) / 10
+    np.testing.assert_allclose(film.mean().reshape(6, 3), m, rtol=1e-12)
+    np.testing.assert_allclose(film.variance().reshape(6, 3), v, rtol=1e-10)
+
+
+def test_cornell_matches_reference_pixels():
+    """Per-pixel z-test of a low-spp render against the stored high-spp reference."""
+    ref, ref_var, meta = load()
+    scene = tracer.load_scene(CORNELL, width=REF_SIZE, height=REF_SIZE)
+    assert (meta["max_depth"], meta["rr_depth"]) == (scene.render.max_depth, scene.render.rr_depth)
+    r = tracer.render(scene, spp=64, seed=7)
+    var = r.variance.astype(np.float64) + ref_var
+    assert np.all(var > 0)
+    z = (r.image - ref) / np.sqrt(var)
+    # 1. no pixel is off by more than the Sidak-corrected critical value
+    zc = z_critical(0.01, z.size)
+    assert np.abs(z).max() < zc, f"max |z| {np.abs(z).max():.2f} >= {zc:.2f}"
+    # 2. no systematic shift: the mean z over all pixels (per channel) is ~N(0, 1/n)
+    n = z.shape[0] * z.shape[1]
+    zmean = z.reshape(-1, 3).mean(axis=0) * np.sqrt(n)
+    assert np.all(np.abs(zmean) < z_critical(0.01, 3)), zmean

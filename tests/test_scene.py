@@ -1,0 +1,114 @@
+"""Scene loading: MTL mapping, sidecar keys and overrides, camera conventions."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+import tracer
+from tracer import bsdfs
+from tests import scenes
+
+MTL_CASES = {
+    "matte": ("Kd 0.5 0.4 0.3\nillum 1", bsdfs.DIFFUSE, dict(kd=[0.5, 0.4, 0.3])),
+    "glass": ("Ni 1.33\nillum 7", bsdfs.DIELECTRIC, dict(ior=1.33)),
+    "frosted": ("Ni 1.5\nPr 0.5\nillum 7", bsdfs.ROUGH_DIELECTRIC, dict(ior=1.5, alpha=0.25)),
+    "mirror": ("Ks 0.9 0.8 0.7\nillum 3", bsdfs.MIRROR, dict(ks=[0.9, 0.8, 0.7])),
+    "metal": ("Kd 0 0 0\nKs 0.5 0.6 0.7\nPr 0.3\nPm 1\nillum 2", bsdfs.CONDUCTOR, dict(ks=[0.5, 0.6, 0.7], alpha=0.09)),
+    "metal_kd": ("Kd 0.2 0.3 0.4\nPr 0.5\nPm 1", bsdfs.CONDUCTOR, dict(ks=[0.2, 0.3, 0.4], alpha=0.25)),
+    "plastic": ("Kd 0.5 0.5 0.5\nKs 0.2 0.2 0.2\nNs 98\nillum 2", bsdfs.PLASTIC,
+                dict(kd=[0.5] * 3, ks=[0.2] * 3, alpha=math.sqrt(2 / 100))),
+}
+
+
+def _mtl_scene(tmp_path):
+    groups, mats = [], {}
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    for i, (name, (body, _, _)) in enumerate(MTL_CASES.items()):
+        groups.append((name, v + [0, 0, i], [[0, 1, 2]]))
+        mats[name] = body
+    groups.append(("lamp", v + [0, 0, -1], [[0, 1, 2]]))
+    mats["lamp"] = "Kd 0 0 0\nKe 1 1 1"
+    return scenes.write_scene(tmp_path, "mats", groups, mats, None)
+
+
+def test_mtl_statements_map_to_bsdfs(tmp_path):
+    scene = tracer.load_scene(_mtl_scene(tmp_path))
+    m = scene.materials
+    cols = dict(kd=slice(0, 3), ks=slice(3, 6), alpha=6, ior=7)
+    for name, (_, mtype, params) in MTL_CASES.items():
+        i = m.names.index(name)
+        assert m.type[i] == mtype, name
+        for key, val in params.items():
+            np.testing.assert_allclose(m.param[i, cols[key]], val, rtol=1e-9, err_msg=f"{name}.{key}")
+    i = m.names.index("lamp")
+    np.testing.assert_array_equal(m.emission[i], [1, 1, 1])
+    assert scene.emissive.sum() == 1
+
+
+def test_unsupported_statements_are_reported_once(tmp_path, caplog):
+    obj = scenes.light_quad(tmp_path, (1, 1, 1))
+    with open(tmp_path / "lamp.mtl", "a") as f:
+        f.write("Ka 0.1 0.1 0.1\nd 0.5\nnewmtl other\nKa 1 1 1\n")
+    scene = tracer.load_scene(obj)
+    reported = [w for w in scene.warnings if "unsupported" in w]
+    assert len(reported) == 2 and any("Ka in 2 material" in w for w in reported)
+
+
+def test_sidecar_material_override_and_json_scene_file(tmp_path):
+    obj = scenes.light_quad(tmp_path, (1, 1, 1))
+    side = json.loads((tmp_path / "lamp.json").read_text())
+    side["obj"] = "lamp.obj"
+    side["materials"] = {"lamp": {"emission": [4, 5, 6]}}
+    (tmp_path / "other.json").write_text(json.dumps(side))
+    scene = tracer.load_scene(tmp_path / "other.json")
+    np.testing.assert_array_equal(scene.materials.emission[0], [4, 5, 6])
+    side["materials"] = {"lamp": {"type": "velvet"}}
+    (tmp_path / "other.json").write_text(json.dumps(side))
+    with pytest.raises(tracer.SceneError, match="velvet.*valid: diffuse"):
+        tracer.load_scene(tmp_path / "other.json")
+
+
+def test_overrides_replace_sidecar_values(tmp_path):
+    obj = scenes.light_quad(tmp_path, (1, 1, 1))
+    scene = tracer.load_scene(obj, width=20, height=10, spp=3, max_depth=7, rr_depth=2, seed=9)
+    assert (scene.width, scene.height) == (20, 10)
+    assert (scene.render.spp, scene.render.max_depth, scene.render.rr_depth, scene.render.seed) == (3, 7, 2, 9)
+    # fov along x is kept; the vertical one follows the aspect ratio
+    assert scene.camera.tan_x == pytest.approx(math.tan(math.radians(15)))
+    assert scene.camera.tan_y == pytest.approx(scene.camera.tan_x / 2)
+
+
+def test_image_right_is_cross_forward_up(tmp_path):
+    # A lamp at +x, camera looking down -z with up +y: the lamp must be in the right half.
+    v = np.array([[0.5, -0.2, 0], [1.0, -0.2, 0], [1.0, 0.2, 0], [0.5, 0.2, 0]], float)
+    obj = scenes.write_scene(tmp_path, "side", [("lamp", v, [[0, 1, 2], [0, 2, 3]])],
+                             {"lamp": "Kd 0 0 0\nKe 1 1 1"},
+                             {"camera": {"origin": [0, 0, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 60},
+                              "film": {"width": 32, "height": 16}})
+    r = tracer.render(tracer.load_scene(obj), spp=1)
+    lit = r.image[:, :, 0] > 0
+    assert lit[:, 16:].sum() > 10 and lit[:, :16].sum() == 0
+    # with up = -y, right = cross(forward, up) is -x: the lamp moves to the left half
+    scene = tracer.load_scene(obj)
+    from tracer.camera import Camera
+
+    scene.camera = Camera.look_at([0, 0, 3], [0, 0, 0], [0, -1, 0], 60, "x", 32, 16)
+    lit2 = tracer.render(scene, spp=1).image[:, :, 0] > 0
+    assert lit2[:, :16].sum() > 10 and lit2[:, 16:].sum() == 0
+
+
+def test_bare_obj_is_framed(tmp_path):
+    v, f = scenes.box_faces((10, 10, 10), (12, 13, 11), inward=False)
+    obj = scenes.write_scene(tmp_path, "bare", [("lamp", v, f)], {"lamp": "Kd 0 0 0\nKe 1 1 1"}, None)
+    r = tracer.render(tracer.load_scene(obj, width=32, height=32), spp=1)
+    lit = (r.image[:, :, 0] > 0).mean()
+    assert 0.05 < lit < 0.95  # the object is in view and does not fill it
+
+
+def test_scene_repr_is_readable():
+    import os
+
+    scene = tracer.load_scene(os.path.join(os.path.dirname(__file__), "..", "scenes", "cornell", "cornell.obj"))
+    text = repr(scene)
+    assert "cornell.obj" in text and "32 triangles" in text and "256x256" in text

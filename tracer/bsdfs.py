@@ -1,0 +1,613 @@
+"""BSDFs: evaluation, importance sampling and densities, as scalar Numba functions.
+
+Materials are a struct of arrays shared with the scene loader and the integrator:
+
+    mat_type  : (M,) int32, one of the type constants below
+    mat_param : (M, 8) float64, columns [kd_r, kd_g, kd_b, ks_r, ks_g, ks_b, alpha, ior]
+
+Every function takes `(mat_type, mat_param, m, ...)` with `m` the material index.
+
+Frames and measures
+-------------------
+Directions are unit 3-tuples of float64 in a LOCAL frame whose +z is the geometric normal as
+stored (not flipped toward the viewer). `wo` points toward the viewer (previous vertex), `wi`
+toward the next vertex. Densities are per unit solid angle of `wi`; for delta lobes the "pdf"
+is the discrete probability of the lobe. What the integrator multiplies into the throughput
+is always `f * |cos wi|` (from `bsdf_eval`) or the sample weight `f * |cos wi| / pdf` (from
+`bsdf_sample`), never a raw 1/pdf.
+
+- DIFFUSE, CONDUCTOR, MIRROR, PLASTIC are two-sided: when wo.z < 0 they mirror the frame, and
+  reflection requires wo.z * wi.z > 0.
+- DIELECTRIC, ROUGH_DIELECTRIC: wo.z > 0 means wo is outside (index 1), wo.z < 0 inside (index
+  ior). Transmission requires wo.z * wi.z < 0.
+- `radiance=True` (camera paths) scales refraction by (n_o / n_i)^2, n_o the index on the side of
+  wo and n_i on the side of wi (pbrt-v4 `ft /= Sqr(etap)`); `radiance=False` (importance or
+  photon transport) leaves it out, so a lossless interface conserves energy exactly.
+
+Microfacet models use the isotropic GGX distribution with the height-correlated Smith masking
+G2 and sample visible normals (Heitz 2018, "Sampling the GGX Distribution of Visible Normals");
+the rough dielectric follows Walter et al. 2007 ("Microfacet Models for Refraction through
+Rough Surfaces").
+"""
+import math
+
+import numpy as np
+from numba import prange
+
+from ._jit import jit, kernel
+from .sampling import INV_PI, cross, dot, normalize, sample_cosine_hemisphere
+
+DIFFUSE = 0  # Lambertian, reflectance kd, two-sided
+CONDUCTOR = 1  # rough metal: GGX, Schlick Fresnel with F0 = ks, two-sided, VNDF sampling
+MIRROR = 2  # smooth perfect conductor tinted by ks (F = ks), two-sided, delta
+DIELECTRIC = 3  # smooth dielectric, interior index ior, exterior 1, exact Fresnel, delta
+ROUGH_DIELECTRIC = 4  # GGX rough dielectric (Walter et al. 2007), VNDF sampling
+PLASTIC = 5  # kd / pi + ks * D G / (4 cos_i cos_o), no Fresnel, two-sided
+TYPE_NAMES = ("diffuse", "conductor", "mirror", "dielectric", "rough_dielectric", "plastic")
+ALPHA_MIN = 1e-4  # every GGX evaluation clamps alpha to at least this
+
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
+# --- Small helpers ---------------------------------------------------------------------------
+@jit
+def lum(rgb):
+    """Rec. 709 luminance of an RGB triple (tuple or length-3 array)."""
+    return 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
+
+
+@jit
+def ns_to_alpha(ns):
+    """GGX/Beckmann roughness for a Phong exponent (MTL `Ns`): sqrt(2 / (ns + 2)) (Walter 2007)."""
+    return np.sqrt(2.0 / (ns + 2.0))
+
+
+@jit
+def _fail():
+    """The (wi, weight, pdf, delta) record of a sample that produced no direction."""
+    return _ZERO3, _ZERO3, 0.0, False
+
+
+@jit
+def _upper(w):
+    """`w` mirrored into the upper hemisphere (two-sided materials, dielectrics seen from wo)."""
+    return (w[0], w[1], abs(w[2]))
+
+
+@jit
+def _reflect(w, h):
+    """Mirror `w` about the unit normal `h` (both pointing away from the surface)."""
+    c = 2.0 * dot(w, h)
+    return (c * h[0] - w[0], c * h[1] - w[1], c * h[2] - w[2])
+
+
+@jit
+def _scale3(a, s):
+    return (a[0] * s, a[1] * s, a[2] * s)
+
+
+@jit
+def _kd(mat_param, m):
+    return (mat_param[m, 0], mat_param[m, 1], mat_param[m, 2])
+
+
+@jit
+def _ks(mat_param, m):
+    return (mat_param[m, 3], mat_param[m, 4], mat_param[m, 5])
+
+
+@jit
+def _alpha(mat_param, m):
+    return max(mat_param[m, 6], ALPHA_MIN)
+
+
+# --- Fresnel -----------------------------------------------------------------------------------
+@jit
+def fresnel_schlick(f0, cos_h):
+    """Schlick's approximation per channel: F0 + (1 - F0) (1 - cos)^5, cos clamped to [0, 1]."""
+    c = 1.0 - min(max(cos_h, 0.0), 1.0)
+    c5 = c * c * c * c * c
+    return (f0[0] + (1.0 - f0[0]) * c5, f0[1] + (1.0 - f0[1]) * c5, f0[2] + (1.0 - f0[2]) * c5)
+
+
+@jit
+def fresnel_dielectric(cos_i, eta):
+    """Exact unpolarised Fresnel reflectance of a smooth dielectric interface.
+
+    cos_i : cosine of the incident direction with the normal on its own side (>= 0).
+    eta   : index on the far (transmitted) side over the index on the incident side.
+    Returns (F, cos_t): reflectance and cosine of the refracted direction; (1, 0) under total
+    internal reflection.
+    """
+    c = min(max(cos_i, 0.0), 1.0)
+    sin2_t = (1.0 - c * c) / (eta * eta)
+    if sin2_t >= 1.0:
+        return 1.0, 0.0
+    cos_t = math.sqrt(1.0 - sin2_t)
+    r_par = (eta * c - cos_t) / (eta * c + cos_t)
+    r_perp = (c - eta * cos_t) / (c + eta * cos_t)
+    return 0.5 * (r_par * r_par + r_perp * r_perp), cos_t
+
+
+# --- GGX microfacet distribution -----------------------------------------------------------
+@jit
+def ggx_d(h, alpha):
+    """GGX density of microfacet normals D(h), normalised so that the integral of D(h) h.z over
+    the hemisphere is 1. h: unit 3-tuple, local frame. 0 below the surface."""
+    if h[2] <= 0.0:
+        return 0.0
+    a2 = alpha * alpha
+    # cos^2 (a^2 - 1) + 1 written as sin^2 + a^2 cos^2: no cancellation near the normal
+    t = h[0] * h[0] + h[1] * h[1] + a2 * h[2] * h[2]
+    if t <= 0.0:
+        return 0.0
+    return a2 / (math.pi * t * t)
+
+
+@jit
+def ggx_lambda(w, alpha):
+    """Smith Lambda(w) for GGX, (sqrt(1 + a^2 tan^2) - 1) / 2 written without cancellation;
+    inf for w in the surface plane."""
+    s2 = w[0] * w[0] + w[1] * w[1]
+    if s2 == 0.0:
+        return 0.0
+    z2 = w[2] * w[2]
+    if z2 == 0.0:
+        return math.inf
+    a2t2 = alpha * alpha * s2 / z2
+    if math.isinf(a2t2):
+        return math.inf
+    return a2t2 / (2.0 * (1.0 + math.sqrt(1.0 + a2t2)))
+
+
+@jit
+def ggx_g1(w, alpha):
+    """Smith masking G1(w) = 1 / (1 + Lambda(w))."""
+    return 1.0 / (1.0 + ggx_lambda(w, alpha))
+
+
+@jit
+def ggx_g2(wo, wi, alpha):
+    """Height-correlated Smith masking-shadowing 1 / (1 + Lambda(wo) + Lambda(wi))."""
+    return 1.0 / (1.0 + ggx_lambda(wo, alpha) + ggx_lambda(wi, alpha))
+
+
+@jit
+def sample_ggx_vndf(w, alpha, u0, u1):
+    """Microfacet normal h distributed as the visible normals from w (Heitz 2018).
+
+    Density of h per unit solid angle: D_w(h) = G1(w) max(0, w.h) D(h) / w.z (`ggx_vndf_pdf`).
+    w: unit 3-tuple with w.z > 0. Returns a unit 3-tuple with h.z >= 0.
+    """
+    # Stretch the view direction to the configuration with alpha = 1 (hemisphere)
+    vh = normalize((alpha * w[0], alpha * w[1], w[2]))
+    # Orthonormal basis (t1, t2, vh)
+    lensq = vh[0] * vh[0] + vh[1] * vh[1]
+    if lensq > 0.0:
+        inv = 1.0 / math.sqrt(lensq)
+        t1 = (-vh[1] * inv, vh[0] * inv, 0.0)
+    else:
+        t1 = (1.0, 0.0, 0.0)
+    t2 = cross(vh, t1)
+    # Uniform point on the unit disk, squeezed onto the visible part of the projected hemisphere
+    r = math.sqrt(u0)
+    phi = 2.0 * math.pi * u1
+    p1 = r * math.cos(phi)
+    p2 = r * math.sin(phi)
+    s = 0.5 * (1.0 + vh[2])
+    p2 = (1.0 - s) * math.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
+    # Lift the point onto the hemisphere
+    p3 = math.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
+    nh = (
+        p1 * t1[0] + p2 * t2[0] + p3 * vh[0],
+        p1 * t1[1] + p2 * t2[1] + p3 * vh[1],
+        p1 * t1[2] + p2 * t2[2] + p3 * vh[2],
+    )
+    # Unstretch back to the ellipsoid configuration
+    return normalize((alpha * nh[0], alpha * nh[1], max(0.0, nh[2])))
+
+
+@jit
+def ggx_vndf_pdf(w, h, alpha):
+    """Density of `sample_ggx_vndf` at h per unit solid angle: G1(w) max(0, w.h) D(h) / w.z."""
+    cos_wh = dot(w, h)
+    if cos_wh <= 0.0 or w[2] <= 0.0:
+        return 0.0
+    return ggx_g1(w, alpha) * cos_wh * ggx_d(h, alpha) / w[2]
+
+
+# --- Diffuse --------------------------------------------------------------------------------
+@jit
+def _diffuse_sample(kd, wo, u0, u1):
+    if wo[2] == 0.0:
+        return _fail()
+    # Cosine-weighted direction on the side of wo
+    w = sample_cosine_hemisphere(u0, u1)
+    if w[2] <= 0.0:
+        return _fail()
+    wi = (w[0], w[1], w[2] if wo[2] > 0.0 else -w[2])
+    return wi, kd, w[2] * INV_PI, False
+
+
+@jit
+def _diffuse_eval(kd, wo, wi):
+    if wo[2] * wi[2] <= 0.0:
+        return _ZERO3
+    return _scale3(kd, abs(wi[2]) * INV_PI)
+
+
+@jit
+def _diffuse_pdf(wo, wi):
+    if wo[2] * wi[2] <= 0.0:
+        return 0.0
+    return abs(wi[2]) * INV_PI
+
+
+# --- Conductor (GGX, Schlick) --------------------------------------------------------------------
+@jit
+def _conductor_sample(ks, alpha, wo, u0, u1):
+    if wo[2] == 0.0:
+        return _fail()
+    # Mirror the frame so that wo is above the surface
+    w = _upper(wo)
+    g1 = ggx_g1(w, alpha)
+    if g1 <= 0.0:
+        return _fail()
+    # Visible normal, then mirror reflection about it
+    h = sample_ggx_vndf(w, alpha, u0, u1)
+    cos_oh = dot(w, h)
+    wl = _reflect(w, h)
+    if cos_oh <= 0.0 or wl[2] <= 0.0:
+        return _fail()
+    pdf = g1 * ggx_d(h, alpha) / (4.0 * w[2])
+    if not pdf > 0.0:
+        return _fail()
+    # weight = F D G2 / (4 cos_o) / pdf = F G2 / G1
+    f = fresnel_schlick(ks, cos_oh)
+    beta = _scale3(f, ggx_g2(w, wl, alpha) / g1)
+    wi = (wl[0], wl[1], wl[2] if wo[2] > 0.0 else -wl[2])
+    return wi, beta, pdf, False
+
+
+@jit
+def _conductor_eval(ks, alpha, wo, wi):
+    if wo[2] * wi[2] <= 0.0:
+        return _ZERO3
+    w = _upper(wo)
+    wl = _upper(wi)
+    h = normalize((w[0] + wl[0], w[1] + wl[1], w[2] + wl[2]))
+    f = fresnel_schlick(ks, dot(w, h))
+    # f cos_i = F D G2 / (4 cos_o cos_i) * cos_i
+    s = ggx_d(h, alpha) * ggx_g2(w, wl, alpha) / (4.0 * w[2])
+    return _scale3(f, s)
+
+
+@jit
+def _microfacet_reflection_pdf(alpha, wo, wi):
+    """D_wo(h) / (4 wo.h) = G1(wo) D(h) / (4 wo.z) for reflection on the side of wo, else 0."""
+    if wo[2] * wi[2] <= 0.0:
+        return 0.0
+    w = _upper(wo)
+    wl = _upper(wi)
+    h = normalize((w[0] + wl[0], w[1] + wl[1], w[2] + wl[2]))
+    return ggx_g1(w, alpha) * ggx_d(h, alpha) / (4.0 * w[2])
+
+
+# --- Mirror -----------------------------------------------------------------------------------
+@jit
+def _mirror_sample(ks, wo):
+    if wo[2] == 0.0:
+        return _fail()
+    return (-wo[0], -wo[1], wo[2]), ks, 1.0, True
+
+
+# --- Smooth dielectric ---------------------------------------------------------------------------
+@jit
+def _dielectric_sample(ior, wo, u2, radiance):
+    if wo[2] == 0.0 or not ior > 0.0:
+        return _fail()
+    # Relative index eta = n_i / n_o across the interface as seen from wo
+    sgn = 1.0 if wo[2] > 0.0 else -1.0
+    eta = ior if wo[2] > 0.0 else 1.0 / ior
+    f, cos_t = fresnel_dielectric(abs(wo[2]), eta)
+    # Choose the lobe with the Fresnel probability
+    if u2 < f:
+        return (-wo[0], -wo[1], wo[2]), (1.0, 1.0, 1.0), f, True
+    # Snell's law: tangential part scales by 1 / eta, wi leaves on the far side
+    wi = (-wo[0] / eta, -wo[1] / eta, -sgn * cos_t)
+    s = 1.0 / (eta * eta) if radiance else 1.0
+    return wi, (s, s, s), 1.0 - f, True
+
+
+# --- Rough dielectric (Walter et al. 2007) ------------------------------------------------------
+@jit
+def _rough_dielectric_sample(alpha, ior, wo, u0, u1, u2, radiance):
+    if wo[2] == 0.0 or not ior > 0.0:
+        return _fail()
+    # Work in the frame mirrored so that wo is above; eta = n_i / n_o
+    sgn = 1.0 if wo[2] > 0.0 else -1.0
+    eta = ior if wo[2] > 0.0 else 1.0 / ior
+    w = _upper(wo)
+    g1 = ggx_g1(w, alpha)
+    if g1 <= 0.0:
+        return _fail()
+    # Visible microfacet normal and its Fresnel reflectance
+    h = sample_ggx_vndf(w, alpha, u0, u1)
+    cos_oh = dot(w, h)
+    if cos_oh <= 0.0 or h[2] <= 0.0:
+        return _fail()
+    d = ggx_d(h, alpha)
+    pdf_h = g1 * cos_oh * d / w[2]
+    f, cos_t = fresnel_dielectric(cos_oh, eta)
+    if u2 < f:
+        # Reflect about h: pdf = F D_wo(h) / (4 wo.h), weight = G2 / G1
+        wl = _reflect(w, h)
+        if wl[2] <= 0.0:
+            return _fail()
+        pdf = f * pdf_h / (4.0 * cos_oh)
+        beta = ggx_g2(w, wl, alpha) / g1
+    else:
+        # Refract through h: pdf = (1 - F) D_wo(h) |dh/dwi|, weight = G2 / G1 (/ eta^2)
+        k = cos_oh / eta - cos_t
+        wl = (-w[0] / eta + k * h[0], -w[1] / eta + k * h[1], -w[2] / eta + k * h[2])
+        if wl[2] >= 0.0:
+            return _fail()
+        denom = cos_oh - eta * cos_t  # wo.h + eta wi.h, with wi.h = -cos_t
+        if denom == 0.0:
+            return _fail()
+        pdf = (1.0 - f) * pdf_h * eta * eta * cos_t / (denom * denom)
+        beta = ggx_g2(w, wl, alpha) / g1
+        if radiance:
+            beta /= eta * eta
+    if not (pdf > 0.0 and pdf < math.inf):
+        return _fail()
+    wi = (wl[0], wl[1], sgn * wl[2])
+    return wi, (beta, beta, beta), pdf, False
+
+
+@jit
+def _rough_dielectric_eval_pdf(alpha, ior, wo, wi, radiance):
+    """(f |cos wi| (scalar), pdf) of the rough dielectric."""
+    if wo[2] == 0.0 or wi[2] == 0.0 or not ior > 0.0:
+        return 0.0, 0.0
+    eta = ior if wo[2] > 0.0 else 1.0 / ior
+    # Mirror the frame so that wo is above
+    w = _upper(wo)
+    wl = (wi[0], wi[1], wi[2] if wo[2] > 0.0 else -wi[2])
+    g1 = ggx_g1(w, alpha)
+    if wl[2] > 0.0:
+        # Reflection: half vector
+        h = normalize((w[0] + wl[0], w[1] + wl[1], w[2] + wl[2]))
+        cos_oh = dot(w, h)
+        if cos_oh <= 0.0:
+            return 0.0, 0.0
+        f, _ = fresnel_dielectric(cos_oh, eta)
+        d = ggx_d(h, alpha)
+        fcos = f * d * ggx_g2(w, wl, alpha) / (4.0 * w[2])
+        pdf = f * g1 * d / (4.0 * w[2])
+        return fcos, pdf
+    # Refraction: generalised half vector h ~ wo + eta wi, turned toward the side of wo
+    h = normalize((w[0] + eta * wl[0], w[1] + eta * wl[1], w[2] + eta * wl[2]))
+    if h[2] < 0.0:
+        h = (-h[0], -h[1], -h[2])
+    cos_oh = dot(w, h)
+    cos_ih = dot(wl, h)
+    if h[2] <= 0.0 or cos_oh <= 0.0 or cos_ih >= 0.0:
+        return 0.0, 0.0
+    f, _ = fresnel_dielectric(cos_oh, eta)
+    denom = cos_oh + eta * cos_ih
+    if f >= 1.0 or denom == 0.0:
+        return 0.0, 0.0
+    d = ggx_d(h, alpha)
+    jac = eta * eta * abs(cos_ih) / (denom * denom)  # |dh / dwi|
+    # f cos_i = (1 - F) D G2 |wi.h| |wo.h| / (|wo.z| (wo.h + eta wi.h)^2), times eta^2 when
+    # transporting importance
+    fcos = (1.0 - f) * d * ggx_g2(w, wl, alpha) * abs(cos_ih) * cos_oh / (w[2] * denom * denom)
+    if not radiance:
+        fcos *= eta * eta
+    pdf = (1.0 - f) * g1 * cos_oh * d / w[2] * jac
+    return fcos, pdf
+
+
+# --- Plastic (Lambert + GGX, no Fresnel) ---------------------------------------------------------
+@jit
+def _plastic_spec_prob(kd, ks):
+    """Probability of sampling the GGX lobe: lum(ks) / (lum(ks) + lum(kd)), 0.5 if both are 0."""
+    ls = max(lum(ks), 0.0)
+    ld = max(lum(kd), 0.0)
+    if ls + ld <= 0.0:
+        return 0.5
+    return ls / (ls + ld)
+
+
+@jit
+def _plastic_eval_pdf(kd, ks, alpha, wo, wi):
+    """(f |cos wi| (3-tuple), pdf) of the plastic, both zero unless wo and wi share a side."""
+    if wo[2] * wi[2] <= 0.0:
+        return _ZERO3, 0.0
+    w = _upper(wo)
+    wl = _upper(wi)
+    h = normalize((w[0] + wl[0], w[1] + wl[1], w[2] + wl[2]))
+    d = ggx_d(h, alpha)
+    spec = d * ggx_g2(w, wl, alpha) / (4.0 * w[2])
+    diff = wl[2] * INV_PI
+    fcos = (
+        kd[0] * diff + ks[0] * spec,
+        kd[1] * diff + ks[1] * spec,
+        kd[2] * diff + ks[2] * spec,
+    )
+    p_s = _plastic_spec_prob(kd, ks)
+    pdf = p_s * ggx_g1(w, alpha) * d / (4.0 * w[2]) + (1.0 - p_s) * diff
+    return fcos, pdf
+
+
+@jit
+def _plastic_sample(kd, ks, alpha, wo, u0, u1, u2):
+    if wo[2] == 0.0:
+        return _fail()
+    w = _upper(wo)
+    # Pick the lobe, then a direction above the surface from it
+    if u2 < _plastic_spec_prob(kd, ks):
+        h = sample_ggx_vndf(w, alpha, u0, u1)
+        wl = _reflect(w, h)
+    else:
+        wl = sample_cosine_hemisphere(u0, u1)
+    if wl[2] <= 0.0:
+        return _fail()
+    wi = (wl[0], wl[1], wl[2] if wo[2] > 0.0 else -wl[2])
+    # One-sample mixture: weight = f cos / (p_s pdf_spec + (1 - p_s) pdf_diffuse)
+    fcos, pdf = _plastic_eval_pdf(kd, ks, alpha, wo, wi)
+    if not (pdf > 0.0 and pdf < math.inf):
+        return _fail()
+    return wi, _scale3(fcos, 1.0 / pdf), pdf, False
+
+
+# --- Public interface: dispatch on the material type -------------------------------------------
+@jit
+def bsdf_sample(mat_type, mat_param, m, wo, u0, u1, u2, radiance):
+    """Importance-sample wi for material m given wo (local frame).
+
+    u0, u1 pick the direction, u2 the lobe. Returns (wi, weight, pdf, delta):
+    wi 3-tuple; weight 3-tuple f |cos wi| / pdf (delta lobes: their discrete weight);
+    pdf the solid-angle density of the whole BSDF's sampling at wi (delta lobes: the lobe's
+    discrete probability); delta True when wi came from a delta lobe. A failed sample returns
+    wi = weight = (0, 0, 0), pdf 0, delta False.
+    """
+    t = mat_type[m]
+    if t == DIFFUSE:
+        return _diffuse_sample(_kd(mat_param, m), wo, u0, u1)
+    if t == CONDUCTOR:
+        return _conductor_sample(_ks(mat_param, m), _alpha(mat_param, m), wo, u0, u1)
+    if t == MIRROR:
+        return _mirror_sample(_ks(mat_param, m), wo)
+    if t == DIELECTRIC:
+        return _dielectric_sample(mat_param[m, 7], wo, u2, radiance)
+    if t == ROUGH_DIELECTRIC:
+        return _rough_dielectric_sample(
+            _alpha(mat_param, m), mat_param[m, 7], wo, u0, u1, u2, radiance
+        )
+    if t == PLASTIC:
+        return _plastic_sample(
+            _kd(mat_param, m), _ks(mat_param, m), _alpha(mat_param, m), wo, u0, u1, u2
+        )
+    return _fail()
+
+
+@jit
+def bsdf_eval(mat_type, mat_param, m, wo, wi, radiance):
+    """f(wo, wi) |cos wi| as a 3-tuple (local frame); (0, 0, 0) for delta materials."""
+    t = mat_type[m]
+    if t == DIFFUSE:
+        return _diffuse_eval(_kd(mat_param, m), wo, wi)
+    if t == CONDUCTOR:
+        return _conductor_eval(_ks(mat_param, m), _alpha(mat_param, m), wo, wi)
+    if t == ROUGH_DIELECTRIC:
+        fcos, _ = _rough_dielectric_eval_pdf(
+            _alpha(mat_param, m), mat_param[m, 7], wo, wi, radiance
+        )
+        return (fcos, fcos, fcos)
+    if t == PLASTIC:
+        fcos, _ = _plastic_eval_pdf(
+            _kd(mat_param, m), _ks(mat_param, m), _alpha(mat_param, m), wo, wi
+        )
+        return fcos
+    return _ZERO3
+
+
+@jit
+def bsdf_pdf(mat_type, mat_param, m, wo, wi):
+    """Solid-angle density with which `bsdf_sample` produces wi; 0 for delta materials."""
+    t = mat_type[m]
+    if t == DIFFUSE:
+        return _diffuse_pdf(wo, wi)
+    if t == CONDUCTOR:
+        return _microfacet_reflection_pdf(_alpha(mat_param, m), wo, wi)
+    if t == ROUGH_DIELECTRIC:
+        _, pdf = _rough_dielectric_eval_pdf(_alpha(mat_param, m), mat_param[m, 7], wo, wi, True)
+        return pdf
+    if t == PLASTIC:
+        _, pdf = _plastic_eval_pdf(
+            _kd(mat_param, m), _ks(mat_param, m), _alpha(mat_param, m), wo, wi
+        )
+        return pdf
+    return 0.0
+
+
+@jit
+def bsdf_is_delta(mat_type, mat_param, m):
+    """True for materials that only scatter into discrete directions (MIRROR, DIELECTRIC)."""
+    t = mat_type[m]
+    return t == MIRROR or t == DIELECTRIC
+
+
+@jit
+def bsdf_albedo(mat_type, mat_param, m):
+    """A cheap albedo 3-tuple for the AOV: kd; ks (metals); min(kd + ks, 1) (plastic); 1 (glass)."""
+    t = mat_type[m]
+    if t == DIFFUSE:
+        return _kd(mat_param, m)
+    if t == CONDUCTOR or t == MIRROR:
+        return _ks(mat_param, m)
+    if t == PLASTIC:
+        return (
+            min(mat_param[m, 0] + mat_param[m, 3], 1.0),
+            min(mat_param[m, 1] + mat_param[m, 4], 1.0),
+            min(mat_param[m, 2] + mat_param[m, 5], 1.0),
+        )
+    if t == DIELECTRIC or t == ROUGH_DIELECTRIC:
+        return (1.0, 1.0, 1.0)
+    return _ZERO3
+
+
+# --- Batch kernels (tests, experiments) ----------------------------------------------------------
+@kernel
+def sample_batch(mat_type, mat_param, m, wo, u, radiance):
+    """`bsdf_sample` over a batch, all with material m.
+
+    wo : (n, 3) float64 local directions; u : (n, 3) float64 in [0, 1) (u0, u1 direction, u2 lobe).
+    Returns wi (n, 3) float64, weight (n, 3) float64, pdf (n,) float64 (solid angle, or the lobe
+    probability where delta), delta (n,) bool.
+    """
+    n = wo.shape[0]
+    wi = np.empty((n, 3))
+    beta = np.empty((n, 3))
+    pdf = np.empty(n)
+    delta = np.empty(n, dtype=np.bool_)
+    for k in prange(n):
+        w, b, p, d = bsdf_sample(
+            mat_type, mat_param, m, (wo[k, 0], wo[k, 1], wo[k, 2]), u[k, 0], u[k, 1], u[k, 2],
+            radiance,
+        )
+        for c in range(3):
+            wi[k, c] = w[c]
+            beta[k, c] = b[c]
+        pdf[k] = p
+        delta[k] = d
+    return wi, beta, pdf, delta
+
+
+@kernel
+def eval_batch(mat_type, mat_param, m, wo, wi, radiance):
+    """`bsdf_eval` over a batch: wo, wi (n, 3) float64 local -> f |cos wi| (n, 3) float64."""
+    n = wo.shape[0]
+    out = np.empty((n, 3))
+    for k in prange(n):
+        f = bsdf_eval(
+            mat_type, mat_param, m, (wo[k, 0], wo[k, 1], wo[k, 2]), (wi[k, 0], wi[k, 1], wi[k, 2]),
+            radiance,
+        )
+        for c in range(3):
+            out[k, c] = f[c]
+    return out
+
+
+@kernel
+def pdf_batch(mat_type, mat_param, m, wo, wi):
+    """`bsdf_pdf` over a batch: wo, wi (n, 3) float64 local -> solid-angle pdf (n,) float64."""
+    n = wo.shape[0]
+    out = np.empty(n)
+    for k in prange(n):
+        out[k] = bsdf_pdf(
+            mat_type, mat_param, m, (wo[k, 0], wo[k, 1], wo[k, 2]), (wi[k, 0], wi[k, 1], wi[k, 2])
+        )
+    return out
