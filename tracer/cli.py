@@ -32,6 +32,7 @@ def _parser():
     p.add_argument("--width", type=int, help="image width (default: the scene's)")
     p.add_argument("--height", type=int, help="image height (default: the scene's)")
     p.add_argument("--accel", default="embree", help=f"ray queries: {' or '.join(ACCELS)} (default embree)")
+    p.add_argument("--filter", default="box", help="pixel filter: box (default) or point (pixel centres)")
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--wave-size", type=int, default=None, help="paths per wave (memory vs overhead)")
     p.add_argument("-o", "--output", help="output EXR (default: <scene name>.exr in the current folder)")
@@ -73,6 +74,7 @@ def _run(argv):
         )
     result = render(scene, spp=args.spp, time=args.time, guide=args.guide, max_depth=args.max_depth,
                     rr_depth=args.rr_depth, seed=args.seed, accel=args.accel, threads=args.threads,
+                    pixel_filter=args.filter,
                     wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet)
     if ref is not None:
         result.stats["metrics"] = metrics.all_metrics(result.image, ref[:, :, :3])

@@ -29,9 +29,13 @@ MAX_BOUNCES = 4096
 
 
 @kernel
-def init_paths(cam, width, height, seed, sample0, g0, pix, key, ray_o, ray_d, beta, L, depth,
+def init_paths(cam, width, height, jitter, seed, sample0, g0, pix, key, ray_o, ray_d, beta, L, depth,
                prev_pdf, prev_delta, aov):
-    """Camera rays for global path indices g0 .. g0+n-1 of a pass (sample-major order)."""
+    """Camera rays for global path indices g0 .. g0+n-1 of a pass (sample-major order).
+
+    jitter: True for the box filter (uniform over the pixel), False for the point filter
+    (every sample through the pixel centre).
+    """
     n = pix.shape[0]
     npix = width * height
     for i in prange(n):
@@ -41,8 +45,8 @@ def init_paths(cam, width, height, seed, sample0, g0, pix, key, ray_o, ray_d, be
         k = path_key(seed, p, s)
         pix[i] = p
         key[i] = k
-        jx = uniform(k, DIM_PIXEL)
-        jy = uniform(k, DIM_PIXEL + 1)
+        jx = uniform(k, DIM_PIXEL) if jitter else 0.5
+        jy = uniform(k, DIM_PIXEL + 1) if jitter else 0.5
         o, d = camera_ray(cam, width, height, p % width, p // width, jx, jy)
         for c in range(3):
             ray_o[i, c] = o[c]
@@ -281,7 +285,7 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats):
     """Trace paths g0 .. g0+n-1 of the pass that starts at sample index sample0; add to film."""
     scene, accel, lights = ctx.scene, ctx.accel, ctx.lights
     t0 = time.perf_counter()
-    init_paths(ctx.cam, scene.width, scene.height, ctx.seed, sample0, g0, buf.pix[:n], buf.key[:n],
+    init_paths(ctx.cam, scene.width, scene.height, ctx.jitter, ctx.seed, sample0, g0, buf.pix[:n], buf.key[:n],
                buf.ray_o[:n], buf.ray_d[:n], buf.beta[:n], buf.L[:n], buf.depth[:n],
                buf.prev_pdf[:n], buf.prev_delta[:n], buf.aov[:n])
     active, active2 = buf.active, buf.active2

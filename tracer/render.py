@@ -16,13 +16,14 @@ import numba
 import numpy as np
 
 from .bvh import make_accel
-from .errors import SettingsError
+from .errors import SettingsError, unknown_name
 from .film import Film
 from .guiding import make_guide
 from .integrator import Stats, WaveBuffers, trace_wave
 from .lights import build_lights
 
 DEFAULT_WAVE = 1 << 18
+FILTERS = ("box", "point")
 
 
 @dataclass
@@ -45,8 +46,9 @@ class RenderResult:
 class _Context:
     """What the wave kernels need, gathered once per render."""
 
-    def __init__(self, scene, accel, lights, seed, max_depth, rr_depth):
+    def __init__(self, scene, accel, lights, seed, max_depth, rr_depth, pixel_filter):
         self.scene, self.accel, self.lights = scene, accel, lights
+        self.jitter = pixel_filter == "box"
         self.cam = scene.camera.packed()
         self.seed = int(seed)
         self.max_depth = int(max_depth)
@@ -64,7 +66,7 @@ def _int_setting(name, value, lo):
 
 def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=None, seed=None,
            accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
-           guide_settings=None):
+           guide_settings=None, pixel_filter="box"):
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
     spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
@@ -73,6 +75,9 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     max_depth, rr_depth, seed: override the scene's render settings (Mitsuba conventions)
     accel      "embree" or "numba"; threads: worker threads (default: all cores)
     callback   f(pass_index, film, stats_dict) called after every pass; return False to stop
+    pixel_filter  "box" (default: samples uniform over the pixel) or "point" (every sample
+               through the pixel centre: no anti-aliasing, so a pixel never mixes two surfaces;
+               for per-pixel regression tests and debugging)
     """
     rs = scene.render
     max_depth = rs.max_depth if max_depth is None else max_depth
@@ -81,6 +86,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     if isinstance(max_depth, bool) or not isinstance(max_depth, (int, np.integer)) or (max_depth < 1 and max_depth != -1):
         raise SettingsError(f"max_depth must be -1 (unlimited) or >= 1, got {max_depth!r}")
     rr_depth = _int_setting("rr_depth", rr_depth, 1)
+    if pixel_filter not in FILTERS:
+        raise unknown_name("pixel filter", pixel_filter, FILTERS)
     seed = _int_setting("seed", seed, 0)
     wave_size = _int_setting("wave_size", wave_size, 1)
     if time is None:
@@ -99,7 +106,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     acc = make_accel(accel, scene.tri, threads=n_threads)
     lights = build_lights(scene)
     t_setup = _time.perf_counter() - t_start
-    ctx = _Context(scene, acc, lights, seed, max_depth, rr_depth)
+    ctx = _Context(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter)
     film = Film(scene.width, scene.height)
     npix = film.n_pixels
     buf = WaveBuffers(min(wave_size, npix * (spp if time is None else 1024)))
@@ -110,8 +117,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
         from tqdm import tqdm
 
         bar = tqdm(total=spp if time is None else None, unit="spp", desc="render", leave=False,
-                   bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} spp [{elapsed}<{remaining}]"
-                   if time is None else "{desc}: {n_fmt} spp [{elapsed}, budget %gs]" % time)
+                   bar_format="{l_bar}{bar}| {n:.0f}/{total_fmt} spp [{elapsed}<{remaining}]"
+                   if time is None else "{desc}: {n:.0f} spp [{elapsed}, budget %gs]" % time)
     interrupted = False
     sample0 = 0
     pass_spp = 1
@@ -133,14 +140,13 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
             tp = _time.perf_counter()
             total = pass_spp * npix
             for g0 in range(0, total, buf.size):
-                trace_wave(ctx, buf, film, sample0, g0, min(buf.size, total - g0), stats)
+                n = min(buf.size, total - g0)
+                trace_wave(ctx, buf, film, sample0, g0, n, stats)
                 if bar is not None:
-                    bar.update(0)
+                    bar.update(n / npix)
             sample0 += pass_spp
             passes.append({"spp": pass_spp, "time": _time.perf_counter() - tp})
-            if bar is not None:
-                bar.update(pass_spp)
-            if callback is not None and callback(pass_index, film, _stats(stats, passes, sample0, t_setup, t_render, acc, n_threads, scene, seed, max_depth, rr_depth, guide)) is False:
+            if callback is not None and callback(pass_index, film, _stats(stats, passes, sample0, t_setup, t_render, acc, n_threads, scene, seed, max_depth, rr_depth, guide, pixel_filter)) is False:
                 break
             pass_spp *= 2
     except KeyboardInterrupt:
@@ -148,14 +154,14 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     finally:
         if bar is not None:
             bar.close()
-    st = _stats(stats, passes, sample0, t_setup, t_render, acc, n_threads, scene, seed, max_depth, rr_depth, guide)
+    st = _stats(stats, passes, sample0, t_setup, t_render, acc, n_threads, scene, seed, max_depth, rr_depth, guide, pixel_filter)
     st["interrupted"] = interrupted
     image = film.mean().astype(np.float32)
     variance = film.variance().astype(np.float32)
     return RenderResult(image, variance, film.aovs(), st, film)
 
 
-def _stats(stats, passes, spp, t_setup, t_render, acc, threads, scene, seed, max_depth, rr_depth, guide):
+def _stats(stats, passes, spp, t_setup, t_render, acc, threads, scene, seed, max_depth, rr_depth, guide, pixel_filter):
     elapsed = _time.perf_counter() - t_render
     samples = stats.samples
     return {
@@ -180,6 +186,7 @@ def _stats(stats, passes, spp, t_setup, t_render, acc, threads, scene, seed, max
         "max_depth": int(max_depth),
         "rr_depth": int(rr_depth),
         "guide": guide,
+        "pixel_filter": pixel_filter,
         "guide_memory_bytes": 0,
         "guide_time_learning": 0.0,
     }
