@@ -3,8 +3,39 @@
 `jit` compiles a scalar helper (inlined into callers by LLVM), `kernel` a batch kernel
 that runs its `prange` loops over all threads. Both cache their machine code on disk
 (`cache=True`) so that a second process does not pay the compile again.
+
+Numba keys a cached kernel on its own source file only: edit a helper in another module
+(a BSDF, a light) and the kernels that inlined it would load stale code. So the cache lives
+in a folder named by a digest of every source file of the package,
+`$XDG_CACHE_HOME/tracer/numba/<digest>` (default `~/.cache/...`; `TRACER_CACHE_DIR`
+replaces the base, and a `NUMBA_CACHE_DIR` set by the user is left alone).
 """
+import hashlib
+import os
+
+import numba
 from numba import njit
+
+
+def _source_digest():
+    """Digest of every .py file of the tracer package (paths and contents)."""
+    root = os.path.dirname(os.path.abspath(__file__))
+    h = hashlib.sha1()
+    for folder, dirs, files in os.walk(root):
+        dirs.sort()
+        for name in sorted(files):
+            if name.endswith(".py"):
+                path = os.path.join(folder, name)
+                h.update(os.path.relpath(path, root).encode())
+                with open(path, "rb") as f:
+                    h.update(f.read())
+    return h.hexdigest()[:16]
+
+
+if not os.environ.get("NUMBA_CACHE_DIR"):
+    _base = os.environ.get("TRACER_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "tracer", "numba")
+    numba.config.CACHE_DIR = os.path.join(_base, _source_digest())
 
 _OPTIONS = dict(cache=True, nogil=True, error_model="numpy", fastmath=False)
 

@@ -23,7 +23,7 @@ from .camera import camera_ray
 from .film import N_AOV
 from .lights import ENV_NONE, env_pdf, env_radiance, sample_light, triangle_emission, triangle_light_pdf
 from .rng import DIM_PIXEL, DIR, LIGHT, LIGHT_POS, LOBE, RR, bounce_dim, path_key, uniform
-from .sampling import cross, dot, frame, normalize, power_heuristic, to_local, to_world
+from .sampling import dot, frame, power_heuristic, to_local, to_world
 
 MAX_BOUNCES = 4096
 
@@ -68,7 +68,7 @@ def _offset(x, ng, w, eps):
 
 
 @kernel
-def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_material, mat_type, mat_param, lt,
+def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type, mat_param, lt,
           beta, L, depth, prev_pdf, prev_delta, key, aov, max_depth, rr_depth, eps,
           alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow):
     """One bounce for every active path: emission, NEE sample, BSDF sample, roulette.
@@ -104,9 +104,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_material, mat_type, ma
         x = (u0 * tri[p, 0, 0] + u1 * tri[p, 1, 0] + u2 * tri[p, 2, 0],
              u0 * tri[p, 0, 1] + u1 * tri[p, 1, 1] + u2 * tri[p, 2, 1],
              u0 * tri[p, 0, 2] + u1 * tri[p, 1, 2] + u2 * tri[p, 2, 2])
-        e1 = (tri[p, 1, 0] - tri[p, 0, 0], tri[p, 1, 1] - tri[p, 0, 1], tri[p, 1, 2] - tri[p, 0, 2])
-        e2 = (tri[p, 2, 0] - tri[p, 0, 0], tri[p, 2, 1] - tri[p, 0, 1], tri[p, 2, 2] - tri[p, 0, 2])
-        ng = normalize(cross(e1, e2))
+        ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])  # unit, counter-clockwise side
         m = tri_material[p]
         cos_o = -dot(wray, ng)  # > 0 when the path arrived on the counter-clockwise side
 
@@ -186,33 +184,53 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_material, mat_type, ma
         alive[k] = True
 
 
-@jit
-def compact(active, alive, src_o, src_d, dst_active, dst_o, dst_d):
-    """Pack the entries with alive[k] to the front of dst_*; returns how many."""
-    j = 0
-    for k in range(active.shape[0]):
-        if alive[k]:
-            dst_active[j] = active[k]
-            for c in range(3):
-                dst_o[j, c] = src_o[k, c]
-                dst_d[j, c] = src_d[k, c]
-            j += 1
-    return j
+_CHUNKS = 64  # compaction splits a batch into this many chunks, counted then written in parallel
 
 
-@jit
-def compact_shadow(active, has_shadow, sh_o, sh_d, sh_tmax, sh_L, out_path, out_o, out_d, out_tmax, out_L):
-    j = 0
-    for k in range(active.shape[0]):
-        if has_shadow[k]:
-            out_path[j] = active[k]
-            out_tmax[j] = sh_tmax[k]
-            for c in range(3):
-                out_o[j, c] = sh_o[k, c]
-                out_d[j, c] = sh_d[k, c]
-                out_L[j, c] = sh_L[k, c]
-            j += 1
-    return j
+@kernel
+def compact(active, alive, next_o, next_d, has_shadow, sh_o, sh_d, sh_tmax, sh_L,
+            dst_active, dst_o, dst_d, sp_path, sp_o, sp_d, sp_tmax, sp_L):
+    """Pack the continuing paths (alive) and the shadow rays (has_shadow) to the front of the
+    dst_* and sp_* arrays, keeping their order. Returns (continuing, shadow rays).
+
+    Two parallel passes over chunks: count per chunk, then write at the prefix-sum offsets.
+    """
+    n = active.shape[0]
+    counts = np.zeros((_CHUNKS + 1, 2), np.int64)
+    for c in prange(_CHUNKS):
+        lo = c * n // _CHUNKS
+        hi = (c + 1) * n // _CHUNKS
+        a = 0
+        b = 0
+        for k in range(lo, hi):
+            a += alive[k]
+            b += has_shadow[k]
+        counts[c + 1, 0] = a
+        counts[c + 1, 1] = b
+    for c in range(_CHUNKS):
+        counts[c + 1, 0] += counts[c, 0]
+        counts[c + 1, 1] += counts[c, 1]
+    for c in prange(_CHUNKS):
+        lo = c * n // _CHUNKS
+        hi = (c + 1) * n // _CHUNKS
+        j = counts[c, 0]
+        js = counts[c, 1]
+        for k in range(lo, hi):
+            if alive[k]:
+                dst_active[j] = active[k]
+                for q in range(3):
+                    dst_o[j, q] = next_o[k, q]
+                    dst_d[j, q] = next_d[k, q]
+                j += 1
+            if has_shadow[k]:
+                sp_path[js] = active[k]
+                sp_tmax[js] = sh_tmax[k]
+                for q in range(3):
+                    sp_o[js, q] = sh_o[k, q]
+                    sp_d[js, q] = sh_d[k, q]
+                    sp_L[js, q] = sh_L[k, q]
+                js += 1
+    return counts[_CHUNKS, 0], counts[_CHUNKS, 1]
 
 
 @kernel
@@ -299,14 +317,14 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats):
         t, prim, b1, b2 = accel.intersect(ro, rd)
         stats.rays += n_active
         t0 = stats.tick("intersect", t0)
-        shade(active[:n_active], ro, rd, t, prim, b1, b2, scene.tri, scene.tri_material,
+        shade(active[:n_active], ro, rd, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
               scene.materials.type, scene.materials.param, lights, buf.beta, buf.L, buf.depth,
               buf.prev_pdf, buf.prev_delta, buf.key, buf.aov, ctx.max_depth, ctx.rr_depth, ctx.eps,
               buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow)
         t0 = stats.tick("shade", t0)
-        ns = compact_shadow(active[:n_active], buf.has_shadow, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L,
-                            buf.sp_path, buf.sp_o, buf.sp_d, buf.sp_tmax, buf.sp_L)
-        n_next = compact(active[:n_active], buf.alive, buf.next_o, buf.next_d, active2, buf.ray_o, buf.ray_d)
+        n_next, ns = compact(active[:n_active], buf.alive, buf.next_o, buf.next_d, buf.has_shadow, buf.sh_o,
+                             buf.sh_d, buf.sh_tmax, buf.sh_L, active2, buf.ray_o, buf.ray_d, buf.sp_path,
+                             buf.sp_o, buf.sp_d, buf.sp_tmax, buf.sp_L)
         active, active2 = active2, active
         t0 = stats.tick("compact", t0)
         if ns:

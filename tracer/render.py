@@ -49,6 +49,9 @@ class _Context:
     def __init__(self, scene, accel, lights, seed, max_depth, rr_depth, pixel_filter):
         self.scene, self.accel, self.lights = scene, accel, lights
         self.jitter = pixel_filter == "box"
+        tri = scene.tri
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        self.tri_normal = n / np.linalg.norm(n, axis=1, keepdims=True)  # (F,3) unit, CCW side
         self.cam = scene.camera.packed()
         self.seed = int(seed)
         self.max_depth = int(max_depth)

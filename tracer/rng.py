@@ -63,7 +63,8 @@ def path_key(seed, pixel, sample):
 def uniform(key, dim):
     """The path's random number in dimension `dim`, a float64 in [0, 1)."""
     h = mix64(key ^ ((np.uint64(dim) + np.uint64(1)) * _GOLDEN))
-    return float(h >> _S11) * _INV53
+    # the top 53 bits; through int64, whose conversion to double is one instruction
+    return float(np.int64(h >> _S11)) * _INV53
 
 
 @jit

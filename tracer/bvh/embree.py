@@ -52,10 +52,12 @@ def _finish(org, dirs, tri, tfar, prim_id, u, v, refine, t, prim, b1, b2):
             continue
         prim[i] = p
         t[i] = tfar[i]
-        b1[i] = u[i]
-        b2[i] = v[i]
         if not refine:
+            b1[i] = u[i]
+            b2[i] = v[i]
             continue
+        b1[i] = 1.0 / 3.0  # kept only if the float64 refinement below fails (degenerate ray)
+        b2[i] = 1.0 / 3.0
         e1x = tri[p, 1, 0] - tri[p, 0, 0]
         e1y = tri[p, 1, 1] - tri[p, 0, 1]
         e1z = tri[p, 1, 2] - tri[p, 0, 2]
@@ -150,9 +152,15 @@ class EmbreeAccel:
     def _intersect_span(self, lo, hi, org, dirs, tmax, t, prim, b1, b2):
         o, d = org[lo:hi], dirs[lo:hi]
         o32, d32, tfar = self._rays32(o, d, tmax[lo:hi] if len(tmax) else tmax)
-        # With `dists` given, embreex writes each ray's final tfar back into it.
+        # With `dists` given, embreex writes each ray's final tfar back into it. When the hit is
+        # refined in float64 anyway, ask for the triangle ids alone (no per-call output dict).
+        if self.refine:
+            ids = self._scene.run(o32, d32, dists=tfar, query="INTERSECT")
+            _finish(o, d, self.tri, tfar, ids, tfar, tfar, True,
+                    t[lo:hi], prim[lo:hi], b1[lo:hi], b2[lo:hi])
+            return
         r = self._scene.run(o32, d32, dists=tfar, query="INTERSECT", output=1)
-        _finish(o, d, self.tri, tfar, r["primID"], r["u"], r["v"], self.refine,
+        _finish(o, d, self.tri, tfar, r["primID"], r["u"], r["v"], False,
                 t[lo:hi], prim[lo:hi], b1[lo:hi], b2[lo:hi])
 
     def _occluded_span(self, lo, hi, org, dirs, tmax, out):
