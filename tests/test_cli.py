@@ -41,6 +41,8 @@ def test_render_writes_exr_png_json(tmp_path, capsys):
     img = tracer.read_image(out)
     assert img.shape == (24, 32, 3) and np.all(np.isfinite(img)) and img.mean() > 0
     assert (tmp_path / "c.png").is_file()
+    aovs = tracer.read_image(tmp_path / "c.aovs.exr")
+    assert aovs.shape == (24, 32, 7) and np.all(np.isfinite(aovs))
     stats = json.loads((tmp_path / "c.json").read_text())
     assert stats["spp"] == 2 and stats["samples"] == 32 * 24 * 2 and stats["rays"] > 0
     assert set(stats["time_stages"]) >= {"intersect", "shade", "occluded"}

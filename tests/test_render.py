@@ -139,3 +139,25 @@ def test_cornell_unlimited_depth_matches_reference_mean():
     average z over the image is tested."""
     zm = _channel_mean_z(_z_against_reference("unlimited", spp=64, seed=7))
     assert np.all(np.abs(zm) < z_critical(0.01, 3)), zm
+
+
+def test_ctrl_c_returns_the_image_so_far(small_cornell):
+    def cb(i, film, st):
+        if i == 1:
+            raise KeyboardInterrupt
+
+    r = tracer.render(small_cornell, spp=64, callback=cb)
+    assert r.stats["interrupted"] and r.stats["spp"] == 3
+    assert np.all(np.isfinite(r.image)) and r.image.mean() > 0
+
+
+def test_aovs_at_the_first_hit(small_cornell):
+    r = tracer.render(small_cornell, spp=2, pixel_filter="point")
+    n = r.aovs["normal"]
+    hit = r.aovs["depth"][:, :, 0] > 0
+    np.testing.assert_allclose(np.linalg.norm(n[hit], axis=1), 1.0, rtol=1e-5)
+    # the Cornell walls are axis-aligned or the blocks' faces; the back wall faces the camera (-z)
+    centre = n[10, 12]
+    assert centre[2] < -0.99 or centre[1] > 0.99
+    red = r.aovs["albedo"][hit][:, 0].astype(np.float64)
+    assert np.all(np.min(np.abs(red[:, None] - [0.725, 0.63, 0.14, 0.0]), axis=1) < 1e-6)

@@ -122,6 +122,12 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
         bar = tqdm(total=spp if time is None else None, unit="spp", desc="render", leave=False,
                    bar_format="{l_bar}{bar}| {n:.0f}/{total_fmt} spp [{elapsed}<{remaining}]"
                    if time is None else "{desc}: {n:.0f} spp [{elapsed}, budget %gs]" % time)
+    settings = {"accel": acc.name, "threads": int(n_threads), "seed": int(seed), "max_depth": int(max_depth),
+                "rr_depth": int(rr_depth), "guide": guide, "pixel_filter": pixel_filter}
+
+    def snapshot():
+        return _stats(scene, stats, passes, sample0, t_setup, t_render, settings)
+
     interrupted = False
     sample0 = 0
     pass_spp = 1
@@ -149,7 +155,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                     bar.update(n / npix)
             sample0 += pass_spp
             passes.append({"spp": pass_spp, "time": _time.perf_counter() - tp})
-            if callback is not None and callback(pass_index, film, _stats(stats, passes, sample0, t_setup, t_render, acc, n_threads, scene, seed, max_depth, rr_depth, guide, pixel_filter)) is False:
+            if callback is not None and callback(pass_index, film, snapshot()) is False:
                 break
             pass_spp *= 2
     except KeyboardInterrupt:
@@ -157,46 +163,42 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     finally:
         if bar is not None:
             bar.close()
-    st = _stats(stats, passes, sample0, t_setup, t_render, acc, n_threads, scene, seed, max_depth, rr_depth, guide, pixel_filter)
+    st = snapshot()
     st["interrupted"] = interrupted
     image = film.mean().astype(np.float32)
     variance = film.variance().astype(np.float32)
     return RenderResult(image, variance, film.aovs(), st, film)
 
 
-def _stats(stats, passes, spp, t_setup, t_render, acc, threads, scene, seed, max_depth, rr_depth, guide, pixel_filter):
+def _stats(scene, stats, passes, spp, t_setup, t_render, settings):
     elapsed = _time.perf_counter() - t_render
     samples = stats.samples
+    rays = stats.rays + stats.shadow_rays
     return {
         "scene": os.path.abspath(scene.path),
         "width": scene.width,
         "height": scene.height,
         "spp": int(spp),
-        "passes": passes,
+        "passes": list(passes),
         "samples": int(samples),
-        "rays": int(stats.rays + stats.shadow_rays),
+        "rays": int(rays),
         "camera_and_bounce_rays": int(stats.rays),
         "shadow_rays": int(stats.shadow_rays),
         "time_setup": t_setup,
         "time_total": elapsed,
         "time_stages": dict(stats.time),
         "msamples_per_s": samples / elapsed / 1e6 if elapsed > 0 else 0.0,
-        "mrays_per_s": (stats.rays + stats.shadow_rays) / elapsed / 1e6 if elapsed > 0 else 0.0,
+        "mrays_per_s": rays / elapsed / 1e6 if elapsed > 0 else 0.0,
         "nonfinite_samples": int(stats.nonfinite),
-        "accel": acc.name,
-        "threads": int(threads),
-        "seed": int(seed),
-        "max_depth": int(max_depth),
-        "rr_depth": int(rr_depth),
-        "guide": guide,
-        "pixel_filter": pixel_filter,
+        **settings,
         "guide_memory_bytes": 0,
         "guide_time_learning": 0.0,
     }
 
 
 def write_outputs(result, path):
-    """Write `path` (EXR), a PNG preview and a stats JSON beside it; returns the three paths."""
+    """Write `path` (EXR, RGB), a PNG preview, `<name>.aovs.exr` (albedo, normal, depth) and a
+    stats JSON beside it; returns the paths of the EXR, the PNG and the JSON."""
     from .imageio import write_image
 
     base, ext = os.path.splitext(os.fspath(path))
@@ -205,6 +207,9 @@ def write_outputs(result, path):
     write_image(path, result.image)
     png = base + ".png"
     write_image(png, result.image)
+    a = result.aovs
+    write_image(base + ".aovs.exr", np.concatenate([a["albedo"], a["normal"], a["depth"]], axis=2),
+                channel_names=("albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z"))
     js = base + ".json"
     with open(js, "w", encoding="utf-8") as f:
         json.dump(result.stats, f, indent=1)
