@@ -2,6 +2,8 @@
 
 relMSE     mean over pixels and channels of (I - R)^2 / (R^2 + 0.01)
 MSE        mean of (I - R)^2
+MrSE       trimmed mean relative squared error: per pixel (I - R)^2 / (R^2 + 0.01), averaged
+           over channels, with the largest 0.01% of pixels dropped (fireflies do not dominate)
 1-SSIM     1 minus the structural similarity (scikit-image) of the two images after
            clamping to [0, 1] with the sRGB curve, over the three channels
 """
@@ -33,6 +35,13 @@ def mse(image, reference):
     return float(np.mean((i - r) ** 2))
 
 
+def mrse_trimmed(image, reference, trim=1e-4, eps=0.01):
+    i, r = _pair(image, reference)
+    e = np.sort(((i - r) ** 2 / (r * r + eps)).mean(axis=2).ravel())
+    keep = e.size - int(np.floor(trim * e.size))
+    return float(e[:max(keep, 1)].mean())
+
+
 def one_minus_ssim(image, reference):
     from skimage.metrics import structural_similarity
 
@@ -48,7 +57,7 @@ def one_minus_ssim(image, reference):
     return float(1.0 - s)
 
 
-METRICS = {"relMSE": relmse, "MSE": mse, "1-SSIM": one_minus_ssim}
+METRICS = {"relMSE": relmse, "MSE": mse, "MrSE": mrse_trimmed, "1-SSIM": one_minus_ssim}
 
 
 def all_metrics(image, reference):
