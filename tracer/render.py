@@ -22,7 +22,7 @@ from .guiding import make_guide
 from .integrator import Stats, WaveBuffers, trace_wave
 from .lights import build_lights
 
-DEFAULT_WAVE = 1 << 18
+DEFAULT_WAVE = 1 << 16
 FILTERS = ("box", "point")
 
 
