@@ -161,3 +161,12 @@ def test_aovs_at_the_first_hit(small_cornell):
     assert centre[2] < -0.99 or centre[1] > 0.99
     red = r.aovs["albedo"][hit][:, 0].astype(np.float64)
     assert np.all(np.min(np.abs(red[:, None] - [0.725, 0.63, 0.14, 0.0]), axis=1) < 1e-6)
+
+
+def test_crop_reproduces_the_window_of_the_full_render(small_cornell):
+    full = tracer.render(small_cornell, spp=3, seed=5)
+    part = tracer.render(small_cornell, spp=3, seed=5, crop=(7, 4, 10, 9))
+    np.testing.assert_array_equal(part.image, full.image[4:13, 7:17])
+    assert part.stats["width"] == 10 and part.stats["height"] == 9
+    with pytest.raises(tracer.SettingsError, match="not inside"):
+        tracer.render(small_cornell, spp=1, crop=(20, 0, 10, 10))

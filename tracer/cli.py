@@ -33,12 +33,22 @@ def _parser():
     p.add_argument("--height", type=int, help="image height (default: the scene's)")
     p.add_argument("--accel", default="embree", help=f"ray queries: {' or '.join(ACCELS)} (default embree)")
     p.add_argument("--filter", default="box", help="pixel filter: box (default) or point (pixel centres)")
+    p.add_argument("--crop", help="render only the window x0,y0,w,h of the image")
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--wave-size", type=int, default=None, help="paths per wave (memory vs overhead)")
     p.add_argument("-o", "--output", help="output EXR (default: <scene name>.exr in the current folder)")
     p.add_argument("--reference", help="reference EXR: print relMSE, MSE and 1-SSIM against it")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary")
     return p
+
+
+def _crop(text):
+    if text is None:
+        return None
+    try:
+        return tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise TracerError(f"--crop takes x0,y0,w,h (four integers), got {text!r}") from None
 
 
 def _run(argv):
@@ -72,9 +82,12 @@ def _run(argv):
         raise TracerError(
             f"{args.reference}: reference is {ref.shape[1]}x{ref.shape[0]}, the render {scene.width}x{scene.height}"
         )
+    if ref is not None and args.crop:
+        x0, y0, w, h = _crop(args.crop)
+        ref = ref[y0:y0 + h, x0:x0 + w]
     result = render(scene, spp=args.spp, time=args.time, guide=args.guide, max_depth=args.max_depth,
                     rr_depth=args.rr_depth, seed=args.seed, accel=args.accel, threads=args.threads,
-                    pixel_filter=args.filter,
+                    pixel_filter=args.filter, crop=_crop(args.crop),
                     wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet)
     if ref is not None:
         result.stats["metrics"] = metrics.all_metrics(result.image, ref[:, :, :3])

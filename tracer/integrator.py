@@ -29,25 +29,31 @@ MAX_BOUNCES = 4096
 
 
 @kernel
-def init_paths(cam, width, height, jitter, seed, sample0, g0, pix, key, ray_o, ray_d, beta, L, depth,
+def init_paths(cam, width, height, crop, jitter, seed, sample0, g0, pix, key, ray_o, ray_d, beta, L, depth,
                prev_pdf, prev_delta, aov):
     """Camera rays for global path indices g0 .. g0+n-1 of a pass (sample-major order).
 
+    crop = (x0, y0, w, h): the film covers that window of the width x height image; pix[i] is the
+    film pixel, while the random stream is keyed by the image pixel, so a cropped render
+    reproduces the same window of the full one exactly.
     jitter: True for the box filter (uniform over the pixel), False for the point filter
     (every sample through the pixel centre).
     """
     n = pix.shape[0]
-    npix = width * height
+    cw = crop[2]
+    npix = crop[2] * crop[3]
     for i in prange(n):
         g = g0 + i
         s = sample0 + g // npix
         p = g % npix
-        k = path_key(seed, p, s)
+        px = crop[0] + p % cw
+        py = crop[1] + p // cw
+        k = path_key(seed, py * width + px, s)
         pix[i] = p
         key[i] = k
         jx = uniform(k, DIM_PIXEL) if jitter else 0.5
         jy = uniform(k, DIM_PIXEL + 1) if jitter else 0.5
-        o, d = camera_ray(cam, width, height, p % width, p // width, jx, jy)
+        o, d = camera_ray(cam, width, height, px, py, jx, jy)
         for c in range(3):
             ray_o[i, c] = o[c]
             ray_d[i, c] = d[c]
@@ -303,7 +309,7 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats):
     """Trace paths g0 .. g0+n-1 of the pass that starts at sample index sample0; add to film."""
     scene, accel, lights = ctx.scene, ctx.accel, ctx.lights
     t0 = time.perf_counter()
-    init_paths(ctx.cam, scene.width, scene.height, ctx.jitter, ctx.seed, sample0, g0, buf.pix[:n], buf.key[:n],
+    init_paths(ctx.cam, scene.width, scene.height, ctx.crop, ctx.jitter, ctx.seed, sample0, g0, buf.pix[:n], buf.key[:n],
                buf.ray_o[:n], buf.ray_d[:n], buf.beta[:n], buf.L[:n], buf.depth[:n],
                buf.prev_pdf[:n], buf.prev_delta[:n], buf.aov[:n])
     active, active2 = buf.active, buf.active2

@@ -46,8 +46,9 @@ class RenderResult:
 class _Context:
     """What the wave kernels need, gathered once per render."""
 
-    def __init__(self, scene, accel, lights, seed, max_depth, rr_depth, pixel_filter):
+    def __init__(self, scene, accel, lights, seed, max_depth, rr_depth, pixel_filter, crop):
         self.scene, self.accel, self.lights = scene, accel, lights
+        self.crop = np.asarray(crop, dtype=np.int64)
         self.jitter = pixel_filter == "box"
         tri = scene.tri
         n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
@@ -61,6 +62,19 @@ class _Context:
         self.eps = 1e-5 * max(accel.scale, extent)
 
 
+def _check_crop(crop, width, height):
+    """(x0, y0, w, h) inside the image; None means the whole image."""
+    if crop is None:
+        return (0, 0, width, height)
+    try:
+        x0, y0, w, h = (int(v) for v in crop)
+    except (TypeError, ValueError):
+        raise SettingsError(f"crop must be four integers x0, y0, w, h, got {crop!r}") from None
+    if w < 1 or h < 1 or x0 < 0 or y0 < 0 or x0 + w > width or y0 + h > height:
+        raise SettingsError(f"crop {x0},{y0},{w},{h} is not inside the {width}x{height} image")
+    return (x0, y0, w, h)
+
+
 def _int_setting(name, value, lo):
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
         raise SettingsError(f"{name} must be an integer >= {lo}, got {value!r}")
@@ -69,7 +83,7 @@ def _int_setting(name, value, lo):
 
 def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=None, seed=None,
            accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
-           guide_settings=None, pixel_filter="box"):
+           guide_settings=None, pixel_filter="box", crop=None):
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
     spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
@@ -81,6 +95,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     pixel_filter  "box" (default: samples uniform over the pixel) or "point" (every sample
                through the pixel centre: no anti-aliasing, so a pixel never mixes two surfaces;
                for per-pixel regression tests and debugging)
+    crop       (x0, y0, w, h): render only that window of the image (its pixels are the same
+               samples as in the full render)
     """
     rs = scene.render
     max_depth = rs.max_depth if max_depth is None else max_depth
@@ -89,6 +105,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     if isinstance(max_depth, bool) or not isinstance(max_depth, (int, np.integer)) or (max_depth < 1 and max_depth != -1):
         raise SettingsError(f"max_depth must be -1 (unlimited) or >= 1, got {max_depth!r}")
     rr_depth = _int_setting("rr_depth", rr_depth, 1)
+    crop = _check_crop(crop, scene.width, scene.height)
     if pixel_filter not in FILTERS:
         raise unknown_name("pixel filter", pixel_filter, FILTERS)
     seed = _int_setting("seed", seed, 0)
@@ -109,8 +126,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     acc = make_accel(accel, scene.tri, threads=n_threads)
     lights = build_lights(scene)
     t_setup = _time.perf_counter() - t_start
-    ctx = _Context(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter)
-    film = Film(scene.width, scene.height)
+    ctx = _Context(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter, crop)
+    film = Film(crop[2], crop[3])
     npix = film.n_pixels
     buf = WaveBuffers(min(wave_size, npix * (spp if time is None else 1024)))
     stats = Stats()
@@ -123,7 +140,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                    bar_format="{l_bar}{bar}| {n:.0f}/{total_fmt} spp [{elapsed}<{remaining}]"
                    if time is None else "{desc}: {n:.0f} spp [{elapsed}, budget %gs]" % time)
     settings = {"accel": acc.name, "threads": int(n_threads), "seed": int(seed), "max_depth": int(max_depth),
-                "rr_depth": int(rr_depth), "guide": guide, "pixel_filter": pixel_filter}
+                "rr_depth": int(rr_depth), "guide": guide, "pixel_filter": pixel_filter, "crop": list(crop)}
 
     def snapshot():
         return _stats(scene, stats, passes, sample0, t_setup, t_render, settings)
@@ -176,8 +193,8 @@ def _stats(scene, stats, passes, spp, t_setup, t_render, settings):
     rays = stats.rays + stats.shadow_rays
     return {
         "scene": os.path.abspath(scene.path),
-        "width": scene.width,
-        "height": scene.height,
+        "width": settings["crop"][2],
+        "height": settings["crop"][3],
         "spp": int(spp),
         "passes": list(passes),
         "samples": int(samples),

@@ -1,0 +1,195 @@
+"""Error against wall time and against samples, per scene and method, in one run on one machine.
+
+    python -m bench.convergence --scenes ajar,cornell --methods bsdf --time 10,20,40,80 --seeds 3
+    python -m bench.convergence --scenes veach-ajar --scene-dir ../shared/scenes --time 10,20
+
+A scene name is `scenes/<name>/<name>.obj`, or `<scene-dir>/<name>/scene.obj` for external
+scenes; its reference is the one `python -m bench.reference` wrote (scenes/<name>/reference.exr,
+or bench/results/references/<name>/ for external scenes). Every method runs at every time
+budget and every spp budget (`--spp`, default: the spp that `bsdf` reached at each time
+budget), once per seed. Writes to `--out` (default bench/results/convergence/):
+
+    records.jsonl                 one JSON record per run: scene, method, settings, seed, spp,
+                                  wall time split into learning / inference / rendering, guide
+                                  memory, every metric against the reference
+    <scene>_time.png, _spp.png    relMSE against wall time and against spp, log-log, one line
+                                  per method (median over seeds, band from min to max)
+    summary.md                    per scene, each method's error at equal time as a ratio to bsdf
+"""
+import argparse
+import json
+import os
+import platform
+import time
+
+import numpy as np
+
+import tracer
+from tracer import metrics
+
+from .reference import ROOT, default_out, load
+
+DEFAULT_OUT = os.path.join(ROOT, "bench", "results", "convergence")
+
+
+def scene_path(name, scene_dir=None):
+    """Path of the OBJ for a scene name (built-in first, then scene_dir/<name>/scene.obj)."""
+    if name.endswith(".obj") or name.endswith(".json"):
+        return name
+    own = os.path.join(ROOT, "scenes", name, f"{name}.obj")
+    if os.path.isfile(own):
+        return own
+    if scene_dir:
+        ext = os.path.join(scene_dir, name, "scene.obj")
+        if os.path.isfile(ext):
+            return ext
+    raise SystemExit(f"bench.convergence: no scene {name!r} in scenes/"
+                     + (f" or {scene_dir}" if scene_dir else " (external scenes need --scene-dir)"))
+
+
+def reference_for(path):
+    out = default_out(path)
+    if not os.path.isfile(os.path.join(out, "reference.exr")):
+        raise SystemExit(f"bench.convergence: no reference for {path}: run "
+                         f"python -m bench.reference {os.path.relpath(path, ROOT)} --time SECONDS")
+    return load(out)
+
+
+def run_one(scene, method, seed, ref, time_budget=None, spp=None):
+    r = tracer.render(scene, spp=spp, time=time_budget, guide=method, seed=seed)
+    s = r.stats
+    learning = s.get("guide_time_learning", 0.0)
+    inference = s.get("guide_time_inference", 0.0)
+    return {
+        "method": method, "seed": seed, "budget": "time" if time_budget else "spp",
+        "time_budget": time_budget, "spp": s["spp"],
+        "time_total": s["time_total"], "time_learning": learning, "time_inference": inference,
+        "time_rendering": s["time_total"] - learning - inference,
+        "guide_memory_bytes": s.get("guide_memory_bytes", 0),
+        "settings": {k: s[k] for k in ("max_depth", "rr_depth", "accel", "threads", "pixel_filter")},
+        "metrics": metrics.all_metrics(r.image, ref),
+        "nonfinite_samples": s["nonfinite_samples"],
+    }
+
+
+def _band(records, method, x_key):
+    """x values and (median, min, max) of relMSE over seeds, per x (grouped by budget)."""
+    groups = {}
+    for r in records:
+        if r["method"] != method:
+            continue
+        key = r["time_budget"] if x_key == "time" else r["spp"]
+        groups.setdefault(key, []).append(r)
+    xs, med, lo, hi = [], [], [], []
+    for key in sorted(groups):
+        rs = groups[key]
+        x = np.median([r["time_total"] for r in rs]) if x_key == "time" else key
+        e = [r["metrics"]["relMSE"] for r in rs]
+        xs.append(x), med.append(np.median(e)), lo.append(min(e)), hi.append(max(e))
+    return np.array(xs), np.array(med), np.array(lo), np.array(hi)
+
+
+def chart(records, scene, methods, x_key, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.6), dpi=110)
+    for m in methods:
+        x, med, lo, hi = _band([r for r in records if r["budget"] == x_key], m, x_key)
+        if len(x) == 0:
+            continue
+        ax.plot(x, med, marker="o", label=m)
+        ax.fill_between(x, lo, hi, alpha=0.2)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time [s]" if x_key == "time" else "samples per pixel")
+    ax.set_ylabel("relMSE")
+    ax.set_title(f"{scene}: relMSE vs {'time' if x_key == 'time' else 'spp'}")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def summary_table(all_records, scenes, methods, times):
+    lines = [f"# Convergence summary ({platform.machine()}, {os.cpu_count()} cores)", "",
+             "relMSE at equal wall time, mean over seeds; ratio to `bsdf` in brackets (< 1 is better).", ""]
+    for scene in scenes:
+        recs = [r for r in all_records if r["scene"] == scene and r["budget"] == "time"]
+        lines += [f"## {scene}", "", "| method | " + " | ".join(f"{t:g} s" for t in times) + " |",
+                  "|---|" + "---|" * len(times)]
+        base = {t: np.mean([r["metrics"]["relMSE"] for r in recs if r["method"] == "bsdf" and r["time_budget"] == t]
+                           or [np.nan]) for t in times}
+        for m in methods:
+            cells = []
+            for t in times:
+                e = [r["metrics"]["relMSE"] for r in recs if r["method"] == m and r["time_budget"] == t]
+                if not e:
+                    cells.append("-")
+                    continue
+                v = float(np.mean(e))
+                ratio = v / base[t] if base[t] and np.isfinite(base[t]) else np.nan
+                cells.append(f"{v:.3g} ({ratio:.2f})" if np.isfinite(ratio) else f"{v:.3g}")
+            lines.append(f"| {m} | " + " | ".join(cells) + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="python -m bench.convergence", description=__doc__.splitlines()[0])
+    p.add_argument("--scenes", required=True, help="comma-separated scene names or paths")
+    p.add_argument("--methods", default="bsdf", help="comma-separated registered guide names")
+    p.add_argument("--time", default="10,20,40,80", help="comma-separated wall-time budgets in seconds")
+    p.add_argument("--spp", default=None, help="comma-separated spp budgets (default: what bsdf reached)")
+    p.add_argument("--seeds", type=int, default=3)
+    p.add_argument("--scene-dir", default=None, help="folder of external scenes (<dir>/<name>/scene.obj)")
+    p.add_argument("--out", default=DEFAULT_OUT)
+    a = p.parse_args(argv)
+    methods = [m.strip() for m in a.methods.split(",") if m.strip()]
+    if "bsdf" not in methods:
+        methods.insert(0, "bsdf")  # every ratio is against bsdf
+    times = [float(t) for t in a.time.split(",")]
+    os.makedirs(a.out, exist_ok=True)
+    all_records = []
+    scenes = [s.strip() for s in a.scenes.split(",") if s.strip()]
+    with open(os.path.join(a.out, "records.jsonl"), "w") as log:
+        for i, given in enumerate(scenes):
+            path = scene_path(given, a.scene_dir)
+            name = os.path.splitext(os.path.basename(given))[0] if given.endswith((".obj", ".json")) else given
+            scenes[i] = name
+            ref, _, _ = reference_for(path)
+            scene = tracer.load_scene(path)
+            tracer.render(scene, spp=1)  # compile and warm up outside every budget
+            recs = []
+            for m in methods:
+                for seed in range(a.seeds):
+                    for t in times:
+                        recs.append(run_one(scene, m, seed, ref, time_budget=t))
+                        print(f"{name} {m} seed {seed} time {t:g}s: {recs[-1]['spp']} spp, "
+                              f"relMSE {recs[-1]['metrics']['relMSE']:.4g}", flush=True)
+            spps = ([int(s) for s in a.spp.split(",")] if a.spp else
+                    sorted({r["spp"] for r in recs if r["method"] == "bsdf"}))
+            for m in methods:
+                for seed in range(a.seeds):
+                    for n in spps:
+                        recs.append(run_one(scene, m, seed, ref, spp=n))
+            for r in recs:
+                r["scene"] = name
+                r["machine"] = f"{platform.machine()}, {os.cpu_count()} cores"
+                r["date"] = time.strftime("%Y-%m-%d %H:%M")
+                log.write(json.dumps(r) + "\n")
+            all_records += recs
+            chart(recs, name, methods, "time", os.path.join(a.out, f"{name}_time.png"))
+            chart(recs, name, methods, "spp", os.path.join(a.out, f"{name}_spp.png"))
+    table = summary_table(all_records, scenes, methods, times)
+    with open(os.path.join(a.out, "summary.md"), "w") as f:
+        f.write(table + "\n")
+    print(table)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

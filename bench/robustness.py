@@ -1,0 +1,92 @@
+"""Robustness: every method is finite, unbiased, and judged against bsdf at equal spp.
+
+    python -m bench.robustness                                  # every built-in scene, every method
+    python -m bench.robustness --scenes ajar --methods bsdf --spp 64
+    python -m bench.robustness --spp 4 --crop 32                # the tiny configuration of the tests
+
+Per scene x method it prints: non-finite pixels and samples; a bias z-score per channel (the
+image mean of (I - R) over its standard error from the render's and the reference's per-pixel
+variances: aggregating over pixels first keeps a pixel's noisy variance estimate from biasing
+the score); and relMSE with its ratio to bsdf at the same spp. It exits with code 1 on any
+non-finite value or a significant bias (two-sided, Sidak-corrected at 1% over every
+scene x method x channel). `--crop N` renders the N x N window at the image centre only.
+"""
+import argparse
+import sys
+
+import numpy as np
+from scipy import stats
+
+import tracer
+from tracer import metrics
+from tracer.guiding import guide_names
+
+from .convergence import reference_for, scene_path
+
+SCENES = ("cornell", "ajar", "glossy", "caustic", "manylights", "window", "spotlit")
+
+
+def bias_z(image, variance, ref, ref_var):
+    """Per channel: mean over pixels of (I - R) divided by its standard error."""
+    d = (image.astype(np.float64) - ref).reshape(-1, 3)
+    v = (variance.astype(np.float64) + ref_var).reshape(-1, 3)
+    n = d.shape[0]
+    se = np.sqrt(v.sum(axis=0)) / n
+    return np.where(se > 0, d.mean(axis=0) / np.where(se > 0, se, 1.0), 0.0)
+
+
+def check(scene_name, method, spp, seed, crop, scene_dir=None):
+    path = scene_path(scene_name, scene_dir)
+    ref, ref_var, _ = reference_for(path)
+    scene = tracer.load_scene(path)
+    window = None
+    if crop:
+        c = min(crop, scene.width, scene.height)
+        window = ((scene.width - c) // 2, (scene.height - c) // 2, c, c)
+        x0, y0 = window[:2]
+        ref, ref_var = ref[y0:y0 + c, x0:x0 + c], ref_var[y0:y0 + c, x0:x0 + c]
+    r = tracer.render(scene, spp=spp, guide=method, seed=seed, crop=window)
+    return {
+        "scene": scene_name, "method": method, "spp": spp,
+        "nonfinite_pixels": int((~np.isfinite(r.image)).any(axis=2).sum()),
+        "nonfinite_samples": int(r.stats["nonfinite_samples"]),
+        "bias_z": bias_z(r.image, r.variance, ref, ref_var),
+        "relMSE": metrics.relmse(r.image, ref),
+    }
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="python -m bench.robustness", description=__doc__.splitlines()[0])
+    p.add_argument("--scenes", default=",".join(SCENES))
+    p.add_argument("--methods", default=",".join(guide_names()))
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--seed", type=int, default=7)
+    p.add_argument("--crop", type=int, default=None, help="render only the central N x N window")
+    p.add_argument("--scene-dir", default=None)
+    a = p.parse_args(argv)
+    scenes = [s for s in a.scenes.split(",") if s]
+    methods = [m for m in a.methods.split(",") if m]
+    if "bsdf" not in methods:
+        methods.insert(0, "bsdf")
+    rows = [check(s, m, a.spp, a.seed, a.crop, a.scene_dir) for s in scenes for m in methods]
+    level = 1.0 - (1.0 - 0.01) ** (1.0 / (3 * len(rows)))
+    zc = float(stats.norm.isf(level / 2))
+    base = {r["scene"]: r["relMSE"] for r in rows if r["method"] == "bsdf"}
+    print(f"{'scene':<12} {'method':<8} {'spp':>5} {'NaN/inf px':>10} {'bad samples':>11} "
+          f"{'bias z (R,G,B)':>22} {'relMSE':>10} {'vs bsdf':>8}")
+    failed = False
+    for r in rows:
+        biased = bool(np.any(np.abs(r["bias_z"]) >= zc))
+        bad = r["nonfinite_pixels"] > 0 or r["nonfinite_samples"] > 0
+        failed |= biased or bad
+        ratio = r["relMSE"] / base[r["scene"]] if base[r["scene"]] > 0 else float("nan")
+        z = ", ".join(f"{v:+.2f}" for v in r["bias_z"])
+        flag = "  <- " + ", ".join(x for x, on in (("NaN/inf", bad), ("biased", biased)) if on) if (bad or biased) else ""
+        print(f"{r['scene']:<12} {r['method']:<8} {r['spp']:>5} {r['nonfinite_pixels']:>10} "
+              f"{r['nonfinite_samples']:>11} {z:>22} {r['relMSE']:>10.4g} {ratio:>8.2f}{flag}")
+    print(f"bias threshold |z| < {zc:.2f} (1% family-wise over {3 * len(rows)} channel tests)")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,26 @@
+"""bench.convergence end to end on a tiny scene: records, charts and the summary table."""
+import json
+import os
+
+from bench import convergence, reference
+from tests import scenes
+
+
+def test_convergence_writes_records_charts_and_table(tmp_path, monkeypatch):
+    obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=8, height=8)
+    ref_dir = tmp_path / "ref"
+    monkeypatch.setattr(reference, "default_out", lambda path: str(ref_dir))
+    monkeypatch.setattr(convergence, "default_out", lambda path: str(ref_dir))
+    assert reference.main([obj, "--spp", "64", "--out", str(ref_dir)]) == 0
+    out = tmp_path / "conv"
+    assert convergence.main(["--scenes", obj, "--time", "0.05,0.1", "--spp", "1,2", "--seeds", "2",
+                             "--out", str(out)]) == 0
+    recs = [json.loads(line) for line in open(out / "records.jsonl")]
+    assert len(recs) == 2 * 2 + 2 * 2  # seeds x time budgets + seeds x spp budgets, one method
+    r = recs[0]
+    assert {"relMSE", "MSE", "MrSE", "1-SSIM"} <= set(r["metrics"]) and r["method"] == "bsdf"
+    assert r["time_rendering"] <= r["time_total"] and r["guide_memory_bytes"] == 0
+    assert r["scene"] == "box"
+    assert os.path.isfile(out / "box_time.png") and os.path.isfile(out / "box_spp.png")
+    table = (out / "summary.md").read_text()
+    assert "| bsdf |" in table and "(1.00)" in table

@@ -1,0 +1,45 @@
+"""bench.robustness in a tiny configuration: passes on a correct render, fails on bias or NaN."""
+import numpy as np
+import pytest
+
+import tracer
+from bench import convergence, reference, robustness
+from tests import scenes
+
+
+@pytest.fixture()
+def box(tmp_path, monkeypatch):
+    obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=48, height=48)
+    ref_dir = tmp_path / "ref"
+    monkeypatch.setattr(convergence, "default_out", lambda path: str(ref_dir))
+    assert reference.main([obj, "--spp", "256", "--out", str(ref_dir)]) == 0
+    return obj, ref_dir
+
+
+def test_correct_render_passes(box, capsys):
+    obj, _ = box
+    assert robustness.main(["--scenes", obj, "--methods", "bsdf", "--spp", "4", "--crop", "32"]) == 0
+    out = capsys.readouterr().out
+    assert "bsdf" in out and "<-" not in out
+
+
+def test_biased_reference_is_caught(box, capsys):
+    obj, ref_dir = box
+    m, v, meta = reference.load(ref_dir)
+    tracer.write_image(ref_dir / "reference.exr", np.concatenate([m * 1.05, v], axis=2))
+    assert robustness.main(["--scenes", obj, "--methods", "bsdf", "--spp", "4", "--crop", "32"]) == 1
+    assert "biased" in capsys.readouterr().out
+
+
+def test_non_finite_pixels_are_caught(box, monkeypatch, capsys):
+    obj, _ = box
+    real = tracer.render
+
+    def broken(*a, **k):
+        r = real(*a, **k)
+        r.image[0, 0, 0] = np.nan
+        return r
+
+    monkeypatch.setattr(tracer, "render", broken)
+    assert robustness.main(["--scenes", obj, "--methods", "bsdf", "--spp", "4", "--crop", "32"]) == 1
+    assert "NaN/inf" in capsys.readouterr().out
