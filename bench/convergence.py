@@ -114,12 +114,24 @@ def chart(records, scene, methods, x_key, path):
     plt.close(fig)
 
 
-def summary_table(all_records, scenes, methods, times):
+def floor_check(records, floor):
+    """(ok, smallest relMSE measured): a reference judges errors down to ten times its floor."""
+    smallest = min(r["metrics"]["relMSE"] for r in records)
+    return floor * 10.0 <= smallest, smallest
+
+
+def summary_table(all_records, scenes, methods, times, floors):
     lines = [f"# Convergence summary ({platform.machine()}, {os.cpu_count()} cores)", "",
-             "relMSE at equal wall time, mean over seeds; ratio to `bsdf` in brackets (< 1 is better).", ""]
+             "relMSE at equal wall time, mean over seeds; ratio to `bsdf` in brackets (< 1 is better).",
+             "Reference check: its noise floor (expected relMSE of the reference itself) must be below a",
+             "tenth of the smallest relMSE it judged.", ""]
     for scene in scenes:
+        ok, smallest = floor_check([r for r in all_records if r["scene"] == scene], floors[scene])
         recs = [r for r in all_records if r["scene"] == scene and r["budget"] == "time"]
-        lines += [f"## {scene}", "", "| method | " + " | ".join(f"{t:g} s" for t in times) + " |",
+        lines += [f"## {scene}", "",
+                  f"Reference: noise floor {floors[scene]:.3g}, smallest error judged {smallest:.3g}: "
+                  + ("good enough." if ok else "**too noisy: extend it with `bench.reference --append`**."), "",
+                  "| method | " + " | ".join(f"{t:g} s" for t in times) + " |",
                   "|---|" + "---|" * len(times)]
         base = {t: np.mean([r["metrics"]["relMSE"] for r in recs if r["method"] == "bsdf" and r["time_budget"] == t]
                            or [np.nan]) for t in times}
@@ -154,13 +166,15 @@ def main(argv=None):
     times = [float(t) for t in a.time.split(",")]
     os.makedirs(a.out, exist_ok=True)
     all_records = []
+    floors = {}
     scenes = [s.strip() for s in a.scenes.split(",") if s.strip()]
     with open(os.path.join(a.out, "records.jsonl"), "w") as log:
         for i, given in enumerate(scenes):
             path = scene_path(given, a.scene_dir)
             name = os.path.splitext(os.path.basename(given))[0] if given.endswith((".obj", ".json")) else given
             scenes[i] = name
-            ref, _, _ = reference_for(path)
+            ref, _, ref_meta = reference_for(path)
+            floors[name] = ref_meta["noise_floor_relmse"]
             scene = tracer.load_scene(path)
             tracer.render(scene, spp=1)  # compile and warm up outside every budget
             recs = []
@@ -184,7 +198,7 @@ def main(argv=None):
             all_records += recs
             chart(recs, name, methods, "time", os.path.join(a.out, f"{name}_time.png"))
             chart(recs, name, methods, "spp", os.path.join(a.out, f"{name}_spp.png"))
-    table = summary_table(all_records, scenes, methods, times)
+    table = summary_table(all_records, scenes, methods, times, floors)
     with open(os.path.join(a.out, "summary.md"), "w") as f:
         f.write(table + "\n")
     print(table)

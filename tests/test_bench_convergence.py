@@ -24,3 +24,10 @@ def test_convergence_writes_records_charts_and_table(tmp_path, monkeypatch):
     assert os.path.isfile(out / "box_time.png") and os.path.isfile(out / "box_spp.png")
     table = (out / "summary.md").read_text()
     assert "| bsdf |" in table and "(1.00)" in table
+    assert "## box" in table and "Reference: noise floor" in table
+
+
+def test_reference_floor_check():
+    recs = [{"metrics": {"relMSE": e}} for e in (0.5, 0.02, 0.3)]
+    assert convergence.floor_check(recs, 0.001) == (True, 0.02)
+    assert convergence.floor_check(recs, 0.005)[0] is False
