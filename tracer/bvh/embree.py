@@ -9,8 +9,9 @@ cacheable. On the Cornell box this halves the time per ray against embreex's own
 
 Embree works in float32. To keep precision far from the origin, vertices and ray origins are
 shifted by the scene's bounding-box centre before the cast (as trimesh's ray_pyembree does).
-Closest hits are then refined in float64: t and the barycentrics are recomputed against the
-float64 triangle Embree reported, so hit points lie on the float64 geometry (`refine=False`
+Closest hits are then refined in float64: t is recomputed against the plane of the float64
+triangle Embree reported, and the barycentrics from precomputed dual vectors of its edges, so
+hit points lie on the float64 geometry (`refine=False`
 keeps Embree's own float32 answers, for tests).
 
 Unlike the Numba BVH (0 < t), Embree also reports a hit at t = 0 exactly (an origin lying on a
@@ -122,29 +123,39 @@ def _load_ray(buf, ib, o, d, centre, tfar):
     return True
 
 
+def _plane_tables(tri):
+    """(F, 12) float64 per triangle: v0, n = e1 x e2, and the duals a1 = (e2 x n) / |n|^2,
+    a2 = (n x e1) / |n|^2, so that a point x of the plane has barycentrics
+    b1 = (x - v0) . a1, b2 = (x - v0) . a2. Degenerate triangles get n = a1 = a2 = 0."""
+    v0 = tri[:, 0]
+    e1, e2 = tri[:, 1] - v0, tri[:, 2] - v0
+    n = np.cross(e1, e2)
+    nn = np.einsum("ij,ij->i", n, n)
+    ok = (nn > 0) & np.isfinite(nn)
+    inv = np.where(ok, 1.0 / np.where(ok, nn, 1.0), 0.0)[:, None]
+    a1 = np.cross(e2, n) * inv
+    a2 = np.cross(n, e1) * inv
+    out = np.concatenate([v0, n, a1, a2], axis=1)
+    out[~ok] = 0.0
+    return np.ascontiguousarray(out)
+
+
 @jit
-def _refine(tri, p, o, d, t, b1, b2, i):
-    """Recompute t, b1, b2 of ray i against triangle p in float64 (Moller-Trumbore without the
-    inside test; barycentrics clamped onto the triangle); keeps Embree's t if degenerate."""
-    e1 = (tri[p, 1, 0] - tri[p, 0, 0], tri[p, 1, 1] - tri[p, 0, 1], tri[p, 1, 2] - tri[p, 0, 2])
-    e2 = (tri[p, 2, 0] - tri[p, 0, 0], tri[p, 2, 1] - tri[p, 0, 1], tri[p, 2, 2] - tri[p, 0, 2])
-    dx, dy, dz = d[0], d[1], d[2]
-    px = dy * e2[2] - dz * e2[1]
-    py = dz * e2[0] - dx * e2[2]
-    pz = dx * e2[1] - dy * e2[0]
-    det = e1[0] * px + e1[1] * py + e1[2] * pz
-    if not abs(det) > 0.0:
+def _refine(plane, p, o, d, t, b1, b2, i):
+    """Recompute t, b1, b2 of ray i against the plane of triangle p in float64 (barycentrics
+    clamped onto the triangle); keeps Embree's answer if the ray runs along the plane."""
+    nx, ny, nz = plane[p, 3], plane[p, 4], plane[p, 5]
+    den = d[0] * nx + d[1] * ny + d[2] * nz
+    if not abs(den) > 0.0:
         return
-    inv = 1.0 / det
-    sx, sy, sz = o[0] - tri[p, 0, 0], o[1] - tri[p, 0, 1], o[2] - tri[p, 0, 2]
-    qx = sy * e1[2] - sz * e1[1]
-    qy = sz * e1[0] - sx * e1[2]
-    qz = sx * e1[1] - sy * e1[0]
-    tt = (e2[0] * qx + e2[1] * qy + e2[2] * qz) * inv
+    tt = ((plane[p, 0] - o[0]) * nx + (plane[p, 1] - o[1]) * ny + (plane[p, 2] - o[2]) * nz) / den
     if not (tt > 0.0 and tt < np.inf):
         return
-    u1 = max((sx * px + sy * py + sz * pz) * inv, 0.0)
-    u2 = max((dx * qx + dy * qy + dz * qz) * inv, 0.0)
+    rx = o[0] + tt * d[0] - plane[p, 0]
+    ry = o[1] + tt * d[1] - plane[p, 1]
+    rz = o[2] + tt * d[2] - plane[p, 2]
+    u1 = max(rx * plane[p, 6] + ry * plane[p, 7] + rz * plane[p, 8], 0.0)
+    u2 = max(rx * plane[p, 9] + ry * plane[p, 10] + rz * plane[p, 11], 0.0)
     s = u1 + u2
     if s > 1.0:
         u1 /= s
@@ -155,7 +166,7 @@ def _refine(tri, p, o, d, t, b1, b2, i):
 
 
 @kernel
-def _intersect(fn, scene, tri, centre, org, dirs, tmax, refine, scratch, t, prim, b1, b2):
+def _intersect(fn, scene, plane, centre, org, dirs, tmax, refine, scratch, t, prim, b1, b2):
     n = org.shape[0]
     has_tmax = tmax.shape[0] == n
     nch = scratch.shape[0]
@@ -182,9 +193,9 @@ def _intersect(fn, scene, tri, centre, org, dirs, tmax, refine, scratch, t, prim
             prim[i] = p
             t[i] = buf[8]
             if refine:
-                b1[i] = 1.0 / 3.0  # kept only if the float64 refinement fails (degenerate ray)
+                b1[i] = 1.0 / 3.0  # kept only if the float64 refinement fails (ray along the plane)
                 b2[i] = 1.0 / 3.0
-                _refine(tri, p, o, d, t, b1, b2, i)
+                _refine(plane, p, o, d, t, b1, b2, i)
             else:
                 b1[i] = buf[15]
                 b2[i] = buf[16]
@@ -233,6 +244,7 @@ class EmbreeAccel:
         limit = numba.config.NUMBA_NUM_THREADS
         self.threads = max(1, min(int(threads), limit) if threads else numba.get_num_threads())
         self.refine = bool(refine)
+        self._plane = _plane_tables(tri)
         lib = _LIB
         self._device = lib.rtcNewDevice(None)
         self._scene = lib.rtcNewScene(self._device)
@@ -263,7 +275,7 @@ class EmbreeAccel:
         t, prim, b1, b2 = np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n)
         if n:
             with _NumbaThreads(self.threads):
-                _intersect(_INTERSECT1, self._scene, self.tri, self.centre, org, dirs,
+                _intersect(_INTERSECT1, self._scene, self._plane, self.centre, org, dirs,
                            np.empty(0) if tmax is None else tmax, self.refine, _scratch(), t, prim, b1, b2)
         return t, prim, b1, b2
 
