@@ -56,7 +56,7 @@ def test_unsupported_statements_are_reported_once(tmp_path, caplog):
 
 
 def test_sidecar_material_override_and_json_scene_file(tmp_path):
-    obj = scenes.light_quad(tmp_path, (1, 1, 1))
+    scenes.light_quad(tmp_path, (1, 1, 1))
     side = json.loads((tmp_path / "lamp.json").read_text())
     side["obj"] = "lamp.obj"
     side["materials"] = {"lamp": {"emission": [4, 5, 6]}}
