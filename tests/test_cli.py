@@ -135,6 +135,22 @@ def test_unknown_guide_lists_valid(capsys):
     fails_with(capsys, [CORNELL, "--guide", "magic"], "unknown guide 'magic'", "bsdf")
 
 
+def test_guide_settings(tmp_path, capsys):
+    fails_with(capsys, [CORNELL, "--guide", "photon", "--guide-opt", "colour=red"],
+               "no setting 'colour'", "photons_per_pixel", "iterations")
+    fails_with(capsys, [CORNELL, "--guide", "grid", "--guide-opt", "iterations=2.5"], "iterations", "integer")
+    fails_with(capsys, [CORNELL, "--guide", "grid", "--guide-opt", "iterations"], "KEY=VALUE")
+    fails_with(capsys, [CORNELL, "--guide", "grid", "--guide-opt", "reconstruct=magic"], "magic", "gaussian")
+    out = tmp_path / "g.exr"
+    code, _, err = run_cli(capsys, CORNELL, "--guide", "photon", "--guide-opt", "iterations=2", "--width", "16",
+                           "--height", "16", "--spp", "12", "-o", out, "-q")
+    assert code == 0, err
+    stats = json.loads((tmp_path / "g.json").read_text())
+    assert stats["guide"] == "photon" and stats["guide_stats"]["settings"]["iterations"] == 2
+    assert stats["guide_memory_bytes"] > 0 and stats["spp"] == 12
+    assert [p["kind"] for p in stats["passes"]][:3] == ["pilot", "train", "train"]
+
+
 def test_unknown_accel_and_option(capsys):
     fails_with(capsys, [CORNELL, "--accel", "optix"], "unknown accel 'optix'", "embree", "numba")
     fails_with(capsys, [CORNELL, "--frobnicate"], "--frobnicate")

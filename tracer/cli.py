@@ -23,6 +23,9 @@ def _parser():
     p = _Parser(prog="tracer", description="Render an OBJ scene with a Numba + Embree path tracer.")
     p.add_argument("scene", help="scene.obj (with optional scene.json beside it) or a JSON scene file")
     p.add_argument("--guide", default="bsdf", help=f"bounce sampler: {', '.join(guide_names())} (default bsdf)")
+    p.add_argument("--guide-opt", action="append", default=[], metavar="KEY=VALUE",
+                   help="a setting of the guide, repeatable (e.g. --guide-opt iterations=6); "
+                        "an unknown key is an error that lists the valid ones")
     budget = p.add_mutually_exclusive_group()
     budget.add_argument("--spp", type=int, help="samples per pixel (default: the scene's render.spp)")
     budget.add_argument("--time", type=float, help="wall-clock budget in seconds instead of --spp")
@@ -76,7 +79,8 @@ def _run(argv):
 
     if args.accel not in ACCELS:
         raise unknown_name("accel", args.accel, ACCELS)
-    make_guide(args.guide)  # unknown names fail here, before the scene is loaded
+    guide_settings = _guide_opts(args.guide_opt)
+    make_guide(args.guide, **guide_settings)  # unknown names and settings fail here, before the scene loads
     scene = load_scene(args.scene, **overrides)
     if ref is not None and ref.shape[:2] != (scene.height, scene.width):
         raise TracerError(
@@ -85,7 +89,8 @@ def _run(argv):
     if ref is not None and args.crop:
         x0, y0, w, h = _crop(args.crop)
         ref = ref[y0:y0 + h, x0:x0 + w]
-    result = render(scene, spp=args.spp, time=args.time, guide=args.guide, max_depth=args.max_depth,
+    result = render(scene, spp=args.spp, time=args.time, guide=args.guide, guide_settings=guide_settings,
+                    max_depth=args.max_depth,
                     rr_depth=args.rr_depth, seed=args.seed, accel=args.accel, threads=args.threads,
                     pixel_filter=args.filter, crop=_crop(args.crop),
                     wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet)
@@ -100,6 +105,24 @@ def _run(argv):
         if ref is not None:
             print("  ".join(f"{k} {v:.6g}" for k, v in s["metrics"].items()))
     return 0
+
+
+def _guide_opts(items):
+    """--guide-opt KEY=VALUE items as a dict; values parsed as int, float or left as text."""
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise TracerError(f"--guide-opt {item!r}: expected KEY=VALUE")
+        for conv in (int, float):
+            try:
+                out[key] = conv(value)
+                break
+            except ValueError:
+                continue
+        else:
+            out[key] = value
+    return out
 
 
 def main(argv=None):

@@ -4,8 +4,18 @@ Python drives the stages of one wave of paths; every stage is one Numba kernel o
 structure-of-arrays path state (`prange` over paths), except the ray queries, which go
 to the accel (Embree or the Numba BVH) in one batch per stage:
 
-    camera rays -> [intersect] -> shade: emission (MIS), NEE sample, BSDF sample,
-    Russian roulette -> [occluded] -> add NEE -> compact -> repeat
+    camera rays -> [intersect] -> shade: emission (MIS), NEE sample, direction sample
+    (BSDF or guide), record the vertex, Russian roulette -> [occluded] -> add NEE -> compact
+    -> repeat
+
+With a guide, a non-delta vertex in a voxel that has a sampling map draws its direction from
+the one-sample MIS mixture p = a p_bsdf + (1 - a) p_guide (a: the voxel's mixing weight, the
+strategy picked by the STRATEGY dimension); that mixture density is the one NEE's and the
+emission's MIS weights use. A guide that learns gets, per vertex, a record (position, normal,
+sampled direction, strategy, mixture pdf, |f cos| and, once the path has ended, the radiance
+that came back along the direction: (L_end - L_at_vertex) / throughput after it, with the
+vertex's own NEE excluded and the emission its direction hit counted without MIS weight, so
+that the record is an unbiased estimate of the incident radiance along that direction).
 
 Depths follow Mitsuba 3: `max_depth` 1 shows emitters seen directly, 2 adds direct light,
 -1 is unlimited (bounded at MAX_BOUNCES for safety); Russian roulette applies from the
@@ -13,6 +23,7 @@ bounce numbered `rr_depth` on, continuing with probability min(max(beta), 0.95).
 """
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 from numba import prange
@@ -22,7 +33,8 @@ from ._jit import jit, kernel
 from .camera import camera_ray
 from .film import N_AOV
 from .lights import ENV_NONE, env_pdf, env_radiance, sample_light, triangle_emission, triangle_light_pdf
-from .rng import DIM_PIXEL, DIR, LIGHT, LIGHT_POS, LOBE, RR, bounce_dim, path_key, uniform
+from .guiding.spatial import find_voxel, voxel_pdf, voxel_sample
+from .rng import DIM_PIXEL, DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, path_key, uniform
 from .sampling import dot, frame, power_heuristic, to_local, to_world
 
 MAX_BOUNCES = 4096
@@ -30,7 +42,7 @@ MAX_BOUNCES = 4096
 
 @kernel
 def init_paths(cam, width, height, crop, jitter, seed, sample0, g0, pix, key, ray_o, ray_d, beta, L, depth,
-               prev_pdf, prev_delta, aov):
+               prev_pdf, prev_delta, aov, prev_rec):
     """Camera rays for global path indices g0 .. g0+n-1 of a pass (sample-major order).
 
     crop = (x0, y0, w, h): the film covers that window of the width x height image; pix[i] is the
@@ -62,6 +74,7 @@ def init_paths(cam, width, height, crop, jitter, seed, sample0, g0, pix, key, ra
         depth[i] = 0
         prev_pdf[i] = 0.0
         prev_delta[i] = False
+        prev_rec[i] = -1
         for c in range(N_AOV):
             aov[i, c] = 0.0
 
@@ -76,18 +89,27 @@ def _offset(x, ng, w, eps):
 @kernel
 def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type, mat_param, lt,
           beta, L, depth, prev_pdf, prev_delta, key, aov, max_depth, rr_depth, eps,
-          alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow):
+          alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow, gs,
+          r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_L0, r_beta, rec_base, record, prev_rec):
     """One bounce for every active path: emission, NEE sample, BSDF sample, roulette.
 
     Entry k of the hit arrays (t, prim, b1, b2) and of ray_o/ray_d belongs to path
     active[k]. Writes the continuation ray to next_o/next_d[k] with alive[k], and a shadow
     ray (origin, unit direction, tmax, unoccluded contribution) with has_shadow[k].
+    gs is the guide's state (an empty one for plain BSDF sampling); with `record`, the vertex
+    of entry k goes to record rec_base + k (strategy -1 where nothing was sampled) in the
+    r_* arrays (the fields of `Records`, passed one by one: Numba 0.68's parallel loops can drop
+    writes into arrays that arrive inside a NamedTuple). prev_rec[i] is the record of the path's
+    last vertex: emission found by its sampled direction counts there in full, not MIS-weighted
+    (the vertex's own NEE, which covers the rest, is not in its record).
     """
     n = active.shape[0]
     for k in prange(n):
         i = active[k]
         alive[k] = False
         has_shadow[k] = False
+        if record:
+            r_strategy[rec_base + k] = -1
         dk = depth[i]                                   # bounces so far (0 at the first hit)
         wray = (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2])  # direction the path arrived along
         b = (beta[i, 0], beta[i, 1], beta[i, 2])        # throughput up to this vertex
@@ -101,6 +123,9 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                     w = power_heuristic(prev_pdf[i], env_pdf(lt, wray))
                 for c in range(3):
                     L[i, c] += b[c] * le[c] * w
+                if record and prev_rec[i] >= 0:
+                    for c in range(3):
+                        r_L0[prev_rec[i], c] -= b[c] * le[c] * (1.0 - w)
             continue
 
         # Hit point (from barycentrics: on the triangle's plane) and geometric normal
@@ -122,6 +147,9 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 w = power_heuristic(prev_pdf[i], triangle_light_pdf(lt, p, t[k] * t[k], cos_o))
             for c in range(3):
                 L[i, c] += b[c] * le[c] * w
+            if record and prev_rec[i] >= 0:
+                for c in range(3):
+                    r_L0[prev_rec[i], c] -= b[c] * le[c] * (1.0 - w)
 
         # AOVs at the first hit: albedo, normal facing the camera, distance
         if dk == 0:
@@ -138,9 +166,18 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         s, tt = frame(ng)
         wo = to_local((-wray[0], -wray[1], -wray[2]), s, tt, ng)
         kk = key[i]
+        delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
+
+        # The guide's voxel and the mixing weight a (probability of BSDF sampling; 1 = no guide)
+        node = -1
+        a = 1.0
+        if gs.res[0] > 0 and not delta:
+            node = find_voxel(gs, x)
+            if node >= 0 and gs.slot[node] >= 0:
+                a = gs.alpha[node]
 
         # Next-event estimation (not at delta BSDFs)
-        if not bsdfs.bsdf_is_delta(mat_type, mat_param, m):
+        if not delta:
             wl, dist, le, pl = sample_light(lt, tri, x, uniform(kk, bounce_dim(dk, LIGHT)),
                                             uniform(kk, bounce_dim(dk, LIGHT_POS)),
                                             uniform(kk, bounce_dim(dk, LIGHT_POS + 1)))
@@ -148,7 +185,10 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 wil = to_local(wl, s, tt, ng)
                 f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wil, True)
                 if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
-                    w = power_heuristic(pl, bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wil))
+                    pb = bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wil)
+                    if a < 1.0:
+                        pb = a * pb + (1.0 - a) * voxel_pdf(gs, node, wl)
+                    w = power_heuristic(pl, pb)
                     so = _offset(x, ng, wl, eps)
                     tmax = dist - 2.0 * eps if math.isfinite(dist) else np.inf
                     if tmax > 0.0:
@@ -159,26 +199,60 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                         sh_tmax[k] = tmax
                         has_shadow[k] = True
 
-        # Sample the BSDF for the continuation
-        wi, wt, pdf, dlt = bsdfs.bsdf_sample(mat_type, mat_param, m, wo,
-                                             uniform(kk, bounce_dim(dk, DIR)),
-                                             uniform(kk, bounce_dim(dk, DIR + 1)),
-                                             uniform(kk, bounce_dim(dk, LOBE)), True)
+        # Sample the continuation: the BSDF, or the guide with probability 1 - a
+        u0 = uniform(kk, bounce_dim(dk, DIR))
+        u1 = uniform(kk, bounce_dim(dk, DIR + 1))
+        strategy = 0
+        if a < 1.0 and uniform(kk, bounce_dim(dk, STRATEGY)) >= a:
+            strategy = 1
+            wiw, pg = voxel_sample(gs, node, u0, u1)
+            wi = to_local(wiw, s, tt, ng)
+            f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wi, True)
+            pdf = a * bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wi) + (1.0 - a) * pg
+            wt = (f[0] / pdf, f[1] / pdf, f[2] / pdf) if pdf > 0.0 else (0.0, 0.0, 0.0)
+            dlt = False
+        else:
+            wi, wt, pdf, dlt = bsdfs.bsdf_sample(mat_type, mat_param, m, wo, u0, u1,
+                                                 uniform(kk, bounce_dim(dk, LOBE)), True)
+            wiw = to_world(wi, s, tt, ng)
+            if a < 1.0 and pdf > 0.0 and not dlt:
+                pm = a * pdf + (1.0 - a) * voxel_pdf(gs, node, wiw)
+                wt = (wt[0] * pdf / pm, wt[1] * pdf / pm, wt[2] * pdf / pm)
+                pdf = pm
         nb = (b[0] * wt[0], b[1] * wt[1], b[2] * wt[2])
         bmax = max(nb[0], max(nb[1], nb[2]))
-        if not (bmax > 0.0) or not math.isfinite(bmax):
-            continue
+        ok = bmax > 0.0 and math.isfinite(bmax)
 
         # Russian roulette
-        if dk + 1 >= rr_depth:
+        if ok and dk + 1 >= rr_depth:
             q = min(bmax, 0.95)
             if uniform(kk, bounce_dim(dk, RR)) >= q:
-                continue
-            nb = (nb[0] / q, nb[1] / q, nb[2] / q)
+                ok = False
+            else:
+                nb = (nb[0] / q, nb[1] / q, nb[2] / q)
         if dk + 1 >= MAX_BOUNCES:
+            ok = False
+
+        # Record the vertex for a guide that learns (also when the path ends here: its radiance is 0)
+        if record:
+            prev_rec[i] = -1
+        if record and not delta and pdf > 0.0:
+            r = rec_base + k
+            prev_rec[i] = r
+            r_strategy[r] = strategy
+            r_node[r] = node
+            r_path[r] = i
+            r_pdf[r] = pdf
+            r_fcos[r] = (0.2126 * wt[0] + 0.7152 * wt[1] + 0.0722 * wt[2]) * pdf
+            for c in range(3):
+                r_x[r, c] = x[c]
+                r_n[r, c] = ng[c]
+                r_wi[r, c] = wiw[c]
+                r_L0[r, c] = L[i, c]
+                r_beta[r, c] = nb[c] if ok else 0.0
+        if not ok:
             continue
 
-        wiw = to_world(wi, s, tt, ng)
         no = _offset(x, ng, wiw, eps)
         for c in range(3):
             beta[i, c] = nb[c]
@@ -195,9 +269,10 @@ _CHUNKS = 64  # compaction splits a batch into this many chunks, counted then wr
 
 @kernel
 def compact(active, alive, next_o, next_d, has_shadow, sh_o, sh_d, sh_tmax, sh_L,
-            dst_active, dst_o, dst_d, sp_path, sp_o, sp_d, sp_tmax, sp_L):
+            dst_active, dst_o, dst_d, sp_path, sp_entry, sp_o, sp_d, sp_tmax, sp_L):
     """Pack the continuing paths (alive) and the shadow rays (has_shadow) to the front of the
-    dst_* and sp_* arrays, keeping their order. Returns (continuing, shadow rays).
+    dst_* and sp_* arrays, keeping their order (sp_entry: the entry k a shadow ray came from).
+    Returns (continuing, shadow rays).
 
     Two parallel passes over chunks: count per chunk, then write at the prefix-sum offsets.
     """
@@ -230,6 +305,7 @@ def compact(active, alive, next_o, next_d, has_shadow, sh_o, sh_d, sh_tmax, sh_L
                 j += 1
             if has_shadow[k]:
                 sp_path[js] = active[k]
+                sp_entry[js] = k
                 sp_tmax[js] = sh_tmax[k]
                 for q in range(3):
                     sp_o[js, q] = sh_o[k, q]
@@ -240,13 +316,67 @@ def compact(active, alive, next_o, next_d, has_shadow, sh_o, sh_d, sh_tmax, sh_L
 
 
 @kernel
-def add_unoccluded(path, occluded, contrib, L):
-    """L[path[j]] += contrib[j] where the shadow ray was not blocked (one entry per path)."""
+def add_unoccluded(path, occluded, contrib, L, entry, rec_L0, rec_base, record):
+    """L[path[j]] += contrib[j] where the shadow ray was not blocked (one entry per path).
+    With `record`, the same goes into the L0 of the vertex's record, so that the radiance
+    recorded along the vertex's sampled direction leaves out the vertex's own NEE."""
     for j in prange(path.shape[0]):
         if not occluded[j]:
             i = path[j]
             for c in range(3):
                 L[i, c] += contrib[j, c]
+            if record:
+                r = rec_base + entry[j]
+                for c in range(3):
+                    rec_L0[r, c] += contrib[j, c]
+
+
+class Records(NamedTuple):
+    """Path vertices of a wave, for guides that learn (R entries; strategy -1 = unused entry)."""
+
+    x: np.ndarray  # (R, 3) float32 position
+    n: np.ndarray  # (R, 3) float32 geometric normal
+    wi: np.ndarray  # (R, 3) float32 sampled world direction
+    pdf: np.ndarray  # (R,) float32 density it was sampled with (the MIS mixture)
+    fcos: np.ndarray  # (R,) float32 luminance of f(wo, wi) |cos|
+    strategy: np.ndarray  # (R,) int8 0 = BSDF, 1 = guide, -1 = no record
+    node: np.ndarray  # (R,) int32 guide voxel (-1: none)
+    path: np.ndarray  # (R,) int64 path slot in the wave
+    L0: np.ndarray  # (R, 3) float64 path radiance when the direction was sampled
+    beta: np.ndarray  # (R, 3) float64 throughput after the vertex (0 if the path ended)
+    radiance: np.ndarray  # (R,) float32 luminance of the radiance that came back along wi
+
+    @staticmethod
+    def allocate(size):
+        f3 = lambda: np.zeros((size, 3), np.float32)  # noqa: E731
+        return Records(f3(), f3(), f3(), np.zeros(size, np.float32), np.zeros(size, np.float32),
+                       np.full(size, -1, np.int8), np.full(size, -1, np.int32), np.zeros(size, np.int64),
+                       np.zeros((size, 3)), np.zeros((size, 3)), np.zeros(size, np.float32))
+
+    def grown(self, size, used):
+        new = Records.allocate(size)
+        for a, b in zip(self, new):
+            b[:used] = a[:used]
+        return new
+
+    def head(self, n):
+        return Records(*(a[:n] for a in self))
+
+
+@kernel
+def finalize_records(strategy, path, beta, L0, radiance, L):
+    """Radiance along each record's direction once its path has ended: luminance of
+    (L_end - L0) / beta per channel (0 where beta is 0, negative or not finite)."""
+    for r in prange(strategy.shape[0]):
+        if strategy[r] < 0:
+            continue
+        i = path[r]
+        v = 0.0
+        for c in range(3):
+            b = beta[r, c]
+            if b > 0.0:
+                v += (0.2126, 0.7152, 0.0722)[c] * (L[i, c] - L0[r, c]) / b
+        radiance[r] = v if (v > 0.0 and math.isfinite(v)) else 0.0
 
 
 @kernel
@@ -274,6 +404,7 @@ class WaveBuffers:
         self.depth = np.zeros(size, np.int32)
         self.prev_pdf = np.zeros(size)
         self.prev_delta = np.zeros(size, np.bool_)
+        self.prev_rec = np.zeros(size, np.int64)
         self.aov = np.zeros((size, N_AOV))
         self.active = np.zeros(size, np.int64)
         self.active2 = np.zeros(size, np.int64)
@@ -283,6 +414,8 @@ class WaveBuffers:
         self.sh_tmax = np.zeros(size)
         self.has_shadow = np.zeros(size, np.bool_)
         self.sp_path = np.zeros(size, np.int64)
+        self.sp_entry = np.zeros(size, np.int64)
+        self.records = Records.allocate(1)  # grown on demand when a guide records
         self.sp_o, self.sp_d, self.sp_L = z3(), z3(), z3()
         self.sp_tmax = np.zeros(size)
 
@@ -290,7 +423,7 @@ class WaveBuffers:
 class Stats:
     """Wall time per stage and ray counts."""
 
-    STAGES = ("camera", "intersect", "shade", "occluded", "compact", "film")
+    STAGES = ("camera", "intersect", "shade", "occluded", "compact", "film", "record")
 
     def __init__(self):
         self.time = {s: 0.0 for s in self.STAGES}
@@ -305,16 +438,21 @@ class Stats:
         return t1
 
 
-def trace_wave(ctx, buf, film, sample0, g0, n, stats):
-    """Trace paths g0 .. g0+n-1 of the pass that starts at sample index sample0; add to film."""
+def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None):
+    """Trace paths g0 .. g0+n-1 of the pass that starts at sample index sample0; add to film.
+    ctx.guide_state steers the sampling; `observe(records)`, if given, gets the wave's vertices."""
     scene, accel, lights = ctx.scene, ctx.accel, ctx.lights
     t0 = time.perf_counter()
     init_paths(ctx.cam, scene.width, scene.height, ctx.crop, ctx.jitter, ctx.seed, sample0, g0, buf.pix[:n], buf.key[:n],
                buf.ray_o[:n], buf.ray_d[:n], buf.beta[:n], buf.L[:n], buf.depth[:n],
-               buf.prev_pdf[:n], buf.prev_delta[:n], buf.aov[:n])
+               buf.prev_pdf[:n], buf.prev_delta[:n], buf.aov[:n], buf.prev_rec[:n])
     active, active2 = buf.active, buf.active2
     active[:n] = np.arange(n)
     n_active = n
+    gs = ctx.guide_state
+    record = observe is not None
+    rec = buf.records
+    n_rec = 0
     t0 = stats.tick("camera", t0)
     for _ in range(MAX_BOUNCES + 1):
         if n_active == 0:
@@ -323,23 +461,33 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats):
         t, prim, b1, b2 = accel.intersect(ro, rd)
         stats.rays += n_active
         t0 = stats.tick("intersect", t0)
+        if record and n_rec + n_active > rec.strategy.shape[0]:
+            rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
         shade(active[:n_active], ro, rd, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
               scene.materials.type, scene.materials.param, lights, buf.beta, buf.L, buf.depth,
               buf.prev_pdf, buf.prev_delta, buf.key, buf.aov, ctx.max_depth, ctx.rr_depth, ctx.eps,
-              buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow)
+              buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow,
+              gs, *rec[:10], n_rec, record, buf.prev_rec)
         t0 = stats.tick("shade", t0)
         n_next, ns = compact(active[:n_active], buf.alive, buf.next_o, buf.next_d, buf.has_shadow, buf.sh_o,
                              buf.sh_d, buf.sh_tmax, buf.sh_L, active2, buf.ray_o, buf.ray_d, buf.sp_path,
-                             buf.sp_o, buf.sp_d, buf.sp_tmax, buf.sp_L)
+                             buf.sp_entry, buf.sp_o, buf.sp_d, buf.sp_tmax, buf.sp_L)
         active, active2 = active2, active
         t0 = stats.tick("compact", t0)
         if ns:
             occ = accel.occluded(buf.sp_o[:ns], buf.sp_d[:ns], buf.sp_tmax[:ns])
-            add_unoccluded(buf.sp_path[:ns], occ, buf.sp_L[:ns], buf.L)
+            add_unoccluded(buf.sp_path[:ns], occ, buf.sp_L[:ns], buf.L, buf.sp_entry[:ns], rec.L0, n_rec, record)
             stats.shadow_rays += ns
             t0 = stats.tick("occluded", t0)
+        if record:
+            n_rec += n_active
         n_active = n_next
     stats.nonfinite += sanitize(buf.L[:n])
+    if record and n_rec:
+        head = rec.head(n_rec)
+        finalize_records(head.strategy, head.path, head.beta, head.L0, head.radiance, buf.L)
+        observe(head)
+        t0 = stats.tick("record", t0)
     film.add(buf.pix[:n], buf.L[:n], buf.aov[:n])
     stats.samples += n
     stats.tick("film", t0)

@@ -18,7 +18,8 @@ import numpy as np
 from .bvh import make_accel
 from .errors import SettingsError, unknown_name
 from .film import Film
-from .guiding import make_guide
+from .guiding import make_guide, warm_up_guides
+from .guiding.spatial import empty_state
 from .integrator import Stats, WaveBuffers, trace_wave
 from .lights import build_lights
 
@@ -60,6 +61,8 @@ class _Context:
         # Ray offset: scaled to the scene, well above float32's resolution at its size
         extent = float(np.abs(scene.bounds).max())
         self.eps = 1e-5 * max(accel.scale, extent)
+        self.n_pixels = int(self.crop[2] * self.crop[3])
+        self.guide_state = empty_state()
 
 
 def _check_crop(crop, width, height):
@@ -87,8 +90,10 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
     spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
-    time       wall-clock budget in seconds for the whole render (instead of spp)
-    guide      registered sampler name ("bsdf"); guide_settings: dict of its settings
+    time       wall-clock budget in seconds for the whole render (instead of spp), learning included
+    guide      registered sampler name (tracer.guiding.guide_names()); guide_settings: dict of its
+               settings (an unknown one is an error listing the valid ones). A guide object (e.g.
+               tracer.guiding.make_guide("photon", ...)) is accepted too, and can be inspected after.
     max_depth, rr_depth, seed: override the scene's render settings (Mitsuba conventions)
     accel      "embree" or "numba"; threads: worker threads (default: all cores)
     callback   f(pass_index, film, stats_dict) called after every pass; return False to stop
@@ -97,6 +102,11 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                for per-pixel regression tests and debugging)
     crop       (x0, y0, w, h): render only that window of the image (its pixels are the same
                samples as in the full render)
+
+    With a guide that learns, the passes follow Algorithm 1 of Zhu et al. 2021: a 1-spp pilot,
+    training iterations of 2^t spp (each followed by the guide's update), then a final guided
+    pass with what the budget has left; the image combines the training iterations and the final
+    pass weighted by the inverse of each one's mean pixel variance (the pilot is not used).
     """
     rs = scene.render
     max_depth = rs.max_depth if max_depth is None else max_depth
@@ -114,9 +124,12 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
         spp = _int_setting("spp", rs.spp if spp is None else spp, 1)
     elif not (isinstance(time, (int, float)) and math.isfinite(time) and time > 0):
         raise SettingsError(f"time must be a positive number of seconds, got {time!r}")
-    g = make_guide(guide, **(guide_settings or {}))
-    if g is not None:  # no guide can be registered before the guiding framework lands
-        raise SettingsError(f"guide {guide!r} is not supported by this integrator yet")
+    if isinstance(guide, str):
+        g = make_guide(guide, **(guide_settings or {}))
+    else:  # a guide object (for experiments): anything with the contract's methods
+        g, guide = guide, getattr(guide, "name", type(guide).__name__)
+        if guide_settings:
+            raise SettingsError("guide_settings go with a guide name, not with a guide object")
     if threads is not None:
         threads = _int_setting("threads", threads, 1)
         numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
@@ -130,14 +143,19 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     # Trace one throwaway path first: it compiles the kernels (or loads them from the cache), so
     # that neither the time budget nor the stats count Numba's compile.
     t0 = _time.perf_counter()
-    trace_wave(ctx, WaveBuffers(1), Film(crop[2], crop[3]), 0, 0, 1, Stats())
+    trace_wave(ctx, WaveBuffers(1), Film(crop[2], crop[3]), 0, 0, 1, Stats(), observe=lambda rec: None)
+    if g is not None:
+        warm_up_guides(ctx)
     t_compile = _time.perf_counter() - t0
     t_start = _time.perf_counter() - t_setup  # the budget counts the scene set-up, not the compile
-    film = Film(crop[2], crop[3])
-    npix = film.n_pixels
+    npix = ctx.n_pixels
+    if g is not None:
+        g.prepare(scene, ctx)
+        ctx.guide_state = g.state()
     buf = WaveBuffers(min(wave_size, npix * (spp if time is None else 1024)))
     stats = Stats()
     passes = []
+    films = []  # (film, kind) of every pass group: "pilot", "train", "final"
     bar = None
     if progress:
         from tqdm import tqdm
@@ -147,53 +165,125 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                    if time is None else "{desc}: {n:.0f} spp [{elapsed}, budget %gs]" % time)
     settings = {"accel": acc.name, "threads": int(n_threads), "seed": int(seed), "max_depth": int(max_depth),
                 "rr_depth": int(rr_depth), "guide": guide, "pixel_filter": pixel_filter, "crop": list(crop)}
+    state = {"sample0": 0}
 
     def snapshot():
-        return _stats(scene, stats, passes, sample0, t_setup, t_render, settings, t_compile)
+        return _stats(scene, stats, passes, state["sample0"], t_setup, t_render, settings, t_compile, g)
+
+    def run_pass(film, pass_spp, kind, learn):
+        """Render pass_spp more spp into `film` (the last of `films`); then the guide learns."""
+        tp = _time.perf_counter()
+        total = pass_spp * npix
+        for g0 in range(0, total, buf.size):
+            n = min(buf.size, total - g0)
+            trace_wave(ctx, buf, film, state["sample0"], g0, n, stats, observe=g.observe if learn else None)
+            if bar is not None:
+                bar.update(n / npix)
+        state["sample0"] += pass_spp
+        entry = {"spp": pass_spp, "time": _time.perf_counter() - tp, "kind": kind, "film": len(films) - 1}
+        if learn:
+            tl = _time.perf_counter()
+            g.update()
+            ctx.guide_state = g.state()
+            entry["time_update"] = _time.perf_counter() - tl
+        passes.append(entry)
+        if callback is not None and callback(len(passes) - 1, film, snapshot()) is False:
+            raise _Stop
 
     interrupted = False
-    sample0 = 0
-    pass_spp = 1
+    final = Film(crop[2], crop[3])
     t_render = _time.perf_counter()
     try:
-        for pass_index in range(1 << 30):  # bounded by spp or time below
+        if g is not None:
+            # Pilot (1 spp, unguided), then training iterations of 2^t N_c spp while they fit
+            films.append((Film(crop[2], crop[3]), "pilot"))
+            run_pass(films[-1][0], 1, "pilot", True)
+            for t in range(1, g.iterations + 1):
+                n = g.spp_init * 2 ** t
+                if time is None:
+                    if state["sample0"] + 2 * n > spp:
+                        break  # the final pass gets at least as many samples as this iteration
+                else:
+                    last = passes[-1]
+                    est = (last["time"] / last["spp"]) * n + 2.0 * last.get("time_update", 0.0)
+                    if _time.perf_counter() - t_start + 2.0 * est > time:
+                        break
+                films.append((Film(crop[2], crop[3]), "train"))
+                run_pass(films[-1][0], n, "train", True)
+        # The final pass(es): the guide frozen; in doubling passes that fit the budget
+        films.append((final, "final"))
+        pass_spp = passes[-1]["spp"] if passes else 1
+        first_final = len(passes)
+        while True:
             if time is None:
-                if sample0 >= spp:
+                if state["sample0"] >= spp:
                     break
-                pass_spp = min(pass_spp, spp - sample0)
+                pass_spp = min(pass_spp, spp - state["sample0"])
             else:
                 elapsed = _time.perf_counter() - t_start
                 if passes:
-                    per_spp = sum(p["time"] for p in passes) / sample0
-                    fit = int((time - elapsed) / per_spp)
-                    pass_spp = min(pass_spp, fit)
+                    ref = passes[first_final:] or passes[-1:]
+                    per_spp = sum(p["time"] for p in ref) / sum(p["spp"] for p in ref)
+                    pass_spp = min(pass_spp, int((time - elapsed) / per_spp))
                     if pass_spp < 1:
                         break
-            tp = _time.perf_counter()
-            total = pass_spp * npix
-            for g0 in range(0, total, buf.size):
-                n = min(buf.size, total - g0)
-                trace_wave(ctx, buf, film, sample0, g0, n, stats)
-                if bar is not None:
-                    bar.update(n / npix)
-            sample0 += pass_spp
-            passes.append({"spp": pass_spp, "time": _time.perf_counter() - tp})
-            if callback is not None and callback(pass_index, film, snapshot()) is False:
-                break
+            run_pass(final, pass_spp, "final", False)
             pass_spp *= 2
-    except KeyboardInterrupt:
-        interrupted = True
+    except (KeyboardInterrupt, _Stop) as e:
+        interrupted = isinstance(e, KeyboardInterrupt)
     finally:
         if bar is not None:
             bar.close()
     st = snapshot()
     st["interrupted"] = interrupted
-    image = film.mean().astype(np.float32)
-    variance = film.variance().astype(np.float32)
-    return RenderResult(image, variance, film.aovs(), st, film)
+    image, variance, weights = combine_films([f for f, _ in films], [k for _, k in films])
+    for p_entry in st["passes"]:
+        p_entry["weight"] = weights[p_entry.pop("film")]
+    aov_film = Film(crop[2], crop[3])
+    for f, _ in films:
+        aov_film.count += f.count
+        aov_film.aov += f.aov
+    return RenderResult(image.astype(np.float32), variance.astype(np.float32), aov_film.aovs(), st, final)
 
 
-def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile):
+class _Stop(Exception):
+    """A callback asked the render to stop."""
+
+
+def combine_films(films, kinds=None):
+    """One image from independent renders of the same pixels: weighted by the inverse of each
+    film's mean pixel variance (Mueller 2019), films with fewer than 2 spp in some pixel left out
+    unless nothing else has samples. Returns (image (H,W,3), variance of it, weights)."""
+    kinds = kinds or ["final"] * len(films)
+    usable = [f.count.size and f.count.min() >= 2 for f in films]
+    if not any(usable):  # e.g. a 1-spp render: the films are summed sample by sample
+        total = Film(films[0].width, films[0].height)
+        for f in films:
+            total.count += f.count
+            total.sum += f.sum
+            total.sumsq += f.sumsq
+        return total.mean(), total.variance(), [1.0 if f.count.max() > 0 else 0.0 for f in films]
+    means, vars_, weights = [], [], []
+    for f, ok, kind in zip(films, usable, kinds):
+        if not ok or (kind == "pilot" and sum(usable) > 1):
+            weights.append(0.0)
+            continue
+        v = f.variance()
+        mv = float(v.mean())
+        means.append(f.mean())
+        vars_.append(v)
+        weights.append(1.0 / mv if mv > 0 else math.inf)
+    w = np.array([x for x in weights if x > 0.0])
+    if np.isinf(w).any():  # noiseless films (a black image): by samples instead
+        w = np.array([float(f.count.sum()) for f, x in zip(films, weights) if x > 0.0])
+    w = w / w.sum()
+    image = sum(wi * m for wi, m in zip(w, means))
+    variance = sum(wi * wi * v for wi, v in zip(w, vars_))
+    it = iter(w)
+    return image, variance, [float(next(it)) if x > 0.0 else 0.0 for x in weights]
+
+
+def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile, guide=None):
     elapsed = _time.perf_counter() - t_render
     samples = stats.samples
     rays = stats.rays + stats.shadow_rays
@@ -202,7 +292,7 @@ def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile):
         "width": settings["crop"][2],
         "height": settings["crop"][3],
         "spp": int(spp),
-        "passes": list(passes),
+        "passes": [dict(p) for p in passes],
         "samples": int(samples),
         "rays": int(rays),
         "camera_and_bounce_rays": int(stats.rays),
@@ -215,8 +305,10 @@ def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile):
         "mrays_per_s": rays / elapsed / 1e6 if elapsed > 0 else 0.0,
         "nonfinite_samples": int(stats.nonfinite),
         **settings,
-        "guide_memory_bytes": 0,
-        "guide_time_learning": 0.0,
+        "guide_memory_bytes": int(guide.peak_memory) if guide is not None else 0,
+        "guide_time_learning": float(guide.time_learning) if guide is not None else 0.0,
+        "guide_time_inference": float(guide.time_inference) if guide is not None else 0.0,
+        "guide_stats": guide.stats() if guide is not None else {},
     }
 
 

@@ -17,6 +17,19 @@ The dimension layout is this table, and nothing else in the code hard-codes a di
     BOUNCE + B*k + 7          bounce k: Russian roulette
 
 with BOUNCE = 2 and B = 8; bounce k = 0 is the first surface the camera ray hits.
+
+Photons (light paths traced to feed guides) have their own keys, `photon_key(seed, iteration,
+index)`, which no camera path shares, and their own table:
+
+    dim                       what
+    0                         light choice (by power; the environment first)
+    1, 2                      position on the light (triangle) / direction (environment)
+    3, 4                      emitted direction (triangle) / position on the disk (environment)
+    P_BOUNCE + PB*k + 0, 1    photon bounce k: direction (BSDF sample)
+    P_BOUNCE + PB*k + 2       photon bounce k: lobe choice
+    P_BOUNCE + PB*k + 3       photon bounce k: Russian roulette
+
+with P_BOUNCE = 5 and PB = 4.
 """
 import numpy as np
 from numba import prange
@@ -32,6 +45,14 @@ STRATEGY = 3
 LIGHT = 4
 LIGHT_POS = 5
 RR = 7
+
+P_LIGHT = 0
+P_POS = 1
+P_DIR = 3
+P_BOUNCE = 5
+P_BLOCK = 4
+P_RR = 3
+_PHOTON_SALT = 0x70686F746F6E  # "photon": keeps photon keys apart from camera-path keys
 
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
@@ -71,6 +92,17 @@ def uniform(key, dim):
 def bounce_dim(depth, slot):
     """Dimension of `slot` (DIR, LOBE, ...) at bounce `depth` (0 = first hit)."""
     return BOUNCE + BLOCK * depth + slot
+
+
+@jit
+def photon_key(seed, iteration, index):
+    """The key of photon `index` of guide iteration `iteration`."""
+    return path_key(np.uint64(seed) ^ np.uint64(_PHOTON_SALT), index, iteration)
+
+
+@jit
+def photon_dim(bounce, slot):
+    return P_BOUNCE + P_BLOCK * bounce + slot
 
 
 @kernel

@@ -1,19 +1,32 @@
 """Directional samplers for the bounce direction, registered by name.
 
-`bsdf` is plain BSDF importance sampling (no guide). Guides that learn (grid, photon,
-odis, pss) register here as they land; each is built from a settings dict, and unknown
-names or settings are errors that list the valid ones.
+`bsdf` is plain BSDF importance sampling (no guide). `grid` and `photon` are histogram guides on
+a hierarchical grid (tracer/guiding/histogram.py), learned from camera paths and from photons.
+Each guide is built from a settings dict; unknown names or settings are errors that list the
+valid ones. A guide implements the contract of DESIGN.md: `prepare(scene, ctx)`, `state()` (the
+arrays the integrator's kernels read, a `spatial.GuideState`), `observe(records)` (the vertices
+of a wave of camera paths), `update()` (between passes), plus `memory_bytes()` and `stats()`.
 """
 from ..errors import SettingsError, unknown_name
+from .histogram import GridGuide, PhotonGuide
 
 # name -> (factory or None for plain BSDF sampling, {setting: default})
 REGISTRY = {
     "bsdf": (None, {}),
+    "grid": (GridGuide, GridGuide.DEFAULTS),
+    "photon": (PhotonGuide, PhotonGuide.DEFAULTS),
 }
 
 
 def guide_names():
     return tuple(REGISTRY)
+
+
+def guide_settings(name):
+    """{setting: default} of guide `name`."""
+    if name not in REGISTRY:
+        raise unknown_name("guide", name, REGISTRY)
+    return dict(REGISTRY[name][1])
 
 
 def make_guide(name, **settings):
@@ -28,3 +41,18 @@ def make_guide(name, **settings):
     if factory is None:
         return None
     return factory(**dict(defaults, **settings))
+
+
+def warm_up_guides(ctx):
+    """Compile (or load from the cache) the kernels guides run, before a render's clock starts."""
+    import numpy as np
+
+    from .directional import bin_of_batch, build_cdfs
+    from .photons import trace_photons
+    from .spatial import HierarchicalGrid, empty_state
+
+    trace_photons(ctx, empty_state(), np.full(1, -1, np.int32), 1, 0, lambda *a: None, wave_size=1)
+    grid = HierarchicalGrid(np.zeros(3), np.ones(3), 2, 2, 2)
+    grid.visit(grid.locate(np.full((1, 3), 0.5)), 0)
+    grid.accumulate(np.zeros(1, np.int64), bin_of_batch(np.array([[0.0, 0.0, 1.0]]), 2, 2), np.ones(1))
+    build_cdfs(grid.power[:1].reshape(1, 2, 2))

@@ -1,0 +1,309 @@
+"""Histogram guides on the hierarchical grid: `grid` (fed by camera paths) and `photon` (fed by photons).
+
+Both follow Algorithm 1 of Zhu et al. 2021 (Photon-Driven Neural Reconstruction for Path Guiding):
+
+- pilot pass (iteration 0): 1 spp of unguided camera paths; their vertices give the bounds of a
+  uniform grid (`resolution` cells along its diagonal) and make the cells they land in valid. The
+  initial data (the pilot's photons, or the pilot's vertices for `grid`) is kept as points and
+  splits the cells at the median point wherever a cell holds more than c of them.
+- iteration t = 1, 2, ...: camera paths guided by the maps of iteration t - 1 render 2^t spp,
+  make the voxels they visit valid and feed each voxel's mixing weight (eq. 14). Then the data of
+  the iteration is binned into the valid voxels, voxels holding more than c sqrt(2^t) samples are
+  split at the middle plane (at most 3 new levels), and every valid voxel's map is reconstructed
+  (normalise, then the `reconstruct` filter) and turned into a CDF.
+- `photon`: 2^t N_p photons per iteration (N_p = `photons_per_pixel` x pixels), their power
+  binned by arrival direction (eq. 10); power maps accumulate over the iterations.
+- `grid`: each camera vertex adds radiance / pdf along its sampled direction (the estimate of the
+  incident radiance integrated over the bin, as in practical path guiding); the maps are rebuilt
+  from every iteration's vertices alone.
+
+The render loop (tracer/render.py) runs the schedule; this module only learns. Mixing weights:
+a = 0.5 until a voxel has `mis_min_samples` vertices of both strategies, then
+a = mean L_bsdf / (mean L_bsdf + mean L_guide), clamped to [alpha_min, alpha_max], with
+L = radiance x |f cos| of each vertex's sampled direction.
+"""
+import math
+import time
+
+import numpy as np
+
+from .._jit import jit
+from ..errors import SettingsError
+from .directional import bin_of_batch, build_cdfs
+from .photons import trace_photons
+from .reconstruct import RECONSTRUCTORS, make_reconstructor
+from .spatial import HierarchicalGrid, empty_state
+
+COMMON = {
+    "iterations": 5,  # training iterations T after the pilot pass
+    "spp_init": 1,  # N_c: iteration t renders 2^t N_c spp
+    "resolution": 16,  # cells along the diagonal of the pilot bounds
+    "map_width": 64,  # phi bins
+    "map_height": 32,  # cos(theta) bins
+    "reconstruct": "gaussian",  # gaussian | pullpush | none
+    "sigma": 1.0,  # gaussian: standard deviation in bins
+    "alpha_min": 0.2,
+    "alpha_max": 0.8,
+    "mis_min_samples": 32,  # Q_thr of eq. 14
+    "max_levels": 3,  # new tree levels per iteration at most
+}
+
+
+@jit
+def _mis_stats(node, strategy, radiance, fcos, mis_sum, mis_n):
+    for i in range(node.shape[0]):
+        nd = node[i]
+        s = strategy[i]
+        if nd < 0 or s < 0:
+            continue
+        mis_sum[nd, s] += radiance[i] * fcos[i]
+        mis_n[nd, s] += 1.0
+
+
+def _int(name, v, lo):
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+        raise SettingsError(f"guide setting {name} must be an integer >= {lo}, got {v!r}")
+    return int(v)
+
+
+def _float(name, v, lo, hi=math.inf):
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not (lo <= v <= hi):
+        raise SettingsError(f"guide setting {name} must be a number in [{lo}, {hi}], got {v!r}")
+    return float(v)
+
+
+class HistogramGuide:
+    """Shared machinery of `grid` and `photon`: the contract of DESIGN.md (prepare, state, observe,
+    update) over a HierarchicalGrid of per-voxel directional histograms."""
+
+    name = "histogram"
+    learns = True
+    DEFAULTS = {}
+
+    def __init__(self, **settings):
+        s = dict(self.DEFAULTS, **settings)
+        self.iterations = _int("iterations", s["iterations"], 0)
+        self.spp_init = _int("spp_init", s["spp_init"], 1)
+        self.resolution = _int("resolution", s["resolution"], 1)
+        self.map_width = _int("map_width", s["map_width"], 2)
+        self.map_height = _int("map_height", s["map_height"], 1)
+        self.c = _float("split_c", s["split_c"], 1.0)
+        self.alpha_min = _float("alpha_min", s["alpha_min"], 0.0, 1.0)
+        self.alpha_max = _float("alpha_max", s["alpha_max"], self.alpha_min, 1.0)
+        self.q_thr = _float("mis_min_samples", s["mis_min_samples"], 1.0)
+        self.max_levels = _int("max_levels", s["max_levels"], 0)
+        if s["reconstruct"] not in RECONSTRUCTORS:
+            raise SettingsError(f"guide setting reconstruct: unknown {s['reconstruct']!r}; valid: "
+                                + ", ".join(sorted(RECONSTRUCTORS)))
+        extra = {"sigma": _float("sigma", s["sigma"], 0.0, 64.0)} if s["reconstruct"] == "gaussian" else {}
+        self.reconstructor = make_reconstructor(s["reconstruct"], **extra)
+        self.settings = s
+        self.grid = None
+
+    # --- the contract ----------------------------------------------------------------------------
+    def prepare(self, scene, ctx):
+        """Start learning for one render: ctx carries the accel, lights, seed, depths, film size."""
+        self.ctx = ctx
+        self.grid = None
+        self.iteration = 0
+        self._state = empty_state(self.map_height, self.map_width)
+        self._pilot = []
+        self.time_learning = 0.0
+        self.time_inference = 0.0
+        self.peak_memory = 0
+        self.info = {"photons": 0, "deposits": 0, "photon_rays": 0, "vertices": 0}
+
+    def state(self):
+        return self._state
+
+    def observe(self, rec):
+        """Vertices of one wave of camera paths (a Records view)."""
+        t0 = time.perf_counter()
+        keep = rec.strategy >= 0
+        self.info["vertices"] += int(keep.sum())
+        if self.grid is None:
+            self._pilot.append({f: np.array(getattr(rec, f)[keep]) for f in ("x", "wi", "pdf", "radiance")})
+        else:
+            g = self.grid
+            nodes = rec.node[keep].astype(np.int64)
+            g.visit(nodes, self.iteration)
+            _mis_stats(rec.node, rec.strategy, rec.radiance, rec.fcos, g.mis_sum, g.mis_n)
+            self._observe_data(rec, keep)
+        self.time_learning += time.perf_counter() - t0
+
+    def update(self):
+        """Between passes: learn from what was observed, rebuild the maps."""
+        t0 = time.perf_counter()
+        if self.grid is None:
+            self._initialise()
+        else:
+            self.grid.recycle(self.iteration)
+            self._iterate_data()
+            self.grid.split_mid(self.c * math.sqrt(2.0 ** self.iteration), self.max_levels)
+        t1 = time.perf_counter()
+        self.time_learning += t1 - t0
+        if self.grid is not None:
+            self._reconstruct()
+            self._update_alpha()
+            self._after_reconstruct()
+            self._state = self.grid.state()
+            self.peak_memory = max(self.peak_memory, self.memory_bytes())
+        self.time_inference += time.perf_counter() - t1
+        self.iteration += 1
+
+    def fixed_state(self, sampling_map):
+        """A state whose whole space is one voxel holding `sampling_map` (n_theta, n_phi) as its
+        (already reconstructed) map, for the sampler contract tests."""
+        m = np.asarray(sampling_map, dtype=np.float32)
+        if m.shape != (self.map_height, self.map_width):
+            raise SettingsError(f"map must be {self.map_height}x{self.map_width}, got {m.shape}")
+        g = HierarchicalGrid(-np.ones(3), np.ones(3), 1, self.map_height, self.map_width)
+        g.visit(np.arange(g.n_cells), 0)
+        cdf, usable = build_cdfs(np.repeat(m[None], g.n_cells, axis=0))
+        for nd in range(g.n_cells):
+            g.cdf[g.data_slot[nd]] = cdf[nd]
+            g.map_ok[nd] = usable[nd]
+        return g.state()
+
+    def memory_bytes(self):
+        return self.grid.memory_bytes() if self.grid is not None else 0
+
+    def stats(self):
+        g = self.grid
+        out = dict(self.info)
+        out.update({"name": self.name, "iterations_done": self.iteration, "settings": dict(self.settings),
+                    "reconstruct": self.reconstructor.describe()})
+        if g is not None:
+            leaves = g.leaves()
+            out.update({"cells": int(g.n_cells), "nodes": int(g.n_nodes), "voxels": int(leaves.size),
+                        "valid_voxels": int((g.data_slot[leaves] >= 0).sum()),
+                        "voxels_with_map": int(g.map_ok[leaves].sum()),
+                        "grid_res": [int(v) for v in g.res]})
+        return out
+
+    # --- steps -------------------------------------------------------------------------------------
+    def _initialise(self):
+        pilot = self._pilot
+        self._pilot = []
+        if not pilot:
+            return
+        pts = {f: np.concatenate([p[f] for p in pilot]) for f in pilot[0]}
+        x = pts["x"].astype(np.float64)
+        if x.shape[0] == 0:
+            return  # no camera vertex: no grid, BSDF sampling everywhere
+        lo, hi = x.min(axis=0), x.max(axis=0)
+        pad = 1e-4 * max(float(np.linalg.norm(hi - lo)), 1e-6)
+        g = self.grid = HierarchicalGrid(lo - pad, hi + pad, self.resolution, self.map_height, self.map_width)
+        g.visit(g.locate(x), 0)
+        self._initial_data(pts)
+
+    def _reconstruct(self):
+        g = self.grid
+        slots = g.slots_in_use()
+        if slots.size == 0:
+            return
+        power = g.power[slots].astype(np.float64)
+        total = power.sum(axis=1)
+        has = total > 0.0
+        slots, power, total = slots[has], power[has], total[has]
+        if slots.size == 0:
+            return
+        maps = (power / total[:, None]).astype(np.float32).reshape(-1, self.map_height, self.map_width)
+        counts = g.count[slots].reshape(maps.shape)
+        rec = self.reconstructor.reconstruct(maps, counts, counts > 0)
+        cdf, usable = build_cdfs(rec)
+        g.cdf[slots] = cdf
+        g.prev[slots] = maps.reshape(slots.size, -1)
+        g.map_ok[g.slot_node[slots]] = usable
+
+    def _update_alpha(self):
+        g = self.grid
+        n = g.n_nodes
+        q = g.mis_n[:n]
+        ok = (q[:, 0] >= self.q_thr) & (q[:, 1] >= self.q_thr)
+        mean = g.mis_sum[:n][ok] / q[ok]
+        tot = mean.sum(axis=1)
+        a = np.where(tot > 0, mean[:, 0] / np.where(tot > 0, tot, 1.0), 0.5)
+        g.alpha[:n][ok] = np.clip(a, self.alpha_min, self.alpha_max)
+
+    # --- what the two guides do differently ----------------------------------------------------------
+    def _initial_data(self, pilot):
+        raise NotImplementedError
+
+    def _observe_data(self, rec, keep):
+        pass
+
+    def _iterate_data(self):
+        pass
+
+    def _after_reconstruct(self):
+        pass
+
+
+class GridGuide(HistogramGuide):
+    """`--guide grid`: maps learned from camera-path vertices (radiance / pdf per direction bin)."""
+
+    name = "grid"
+    DEFAULTS = dict(COMMON, split_c=4000.0)
+
+    def _splat(self, x, wi, pdf, radiance, nodes=None):
+        g = self.grid
+        if nodes is None:
+            nodes = g.locate(x.astype(np.float64))
+        bins = bin_of_batch(np.ascontiguousarray(wi, dtype=np.float64), self.map_height, self.map_width)
+        val = np.where(pdf > 0, radiance.astype(np.float64) / np.maximum(pdf.astype(np.float64), 1e-30), 0.0)
+        g.accumulate(nodes, bins, val)
+
+    def _initial_data(self, pilot):
+        g = self.grid
+        g.split_median(pilot["x"].astype(np.float64), self.c, self.max_levels)
+        g.node_count[:] = 0.0
+        self._splat(pilot["x"], pilot["wi"], pilot["pdf"], pilot["radiance"])
+
+    def _observe_data(self, rec, keep):
+        self._splat(rec.x[keep], rec.wi[keep], rec.pdf[keep], rec.radiance[keep], rec.node[keep].astype(np.int64))
+
+    def _after_reconstruct(self):
+        g = self.grid  # maps are rebuilt from each iteration's vertices alone
+        g.power[:] = 0.0
+        g.count[:] = 0.0
+        g.node_count[:] = 0.0
+
+
+class PhotonGuide(HistogramGuide):
+    """`--guide photon`: maps from photon power binned by arrival direction (eq. 10)."""
+
+    name = "photon"
+    DEFAULTS = dict(COMMON, split_c=500.0, photons_per_pixel=1.0)
+
+    def __init__(self, **settings):
+        super().__init__(**settings)
+        self.photons_per_pixel = _float("photons_per_pixel", self.settings["photons_per_pixel"], 0.0, 1e6)
+
+    def _n_photons(self, iteration):
+        return int(round(self.photons_per_pixel * self.ctx.n_pixels * self.spp_init * 2 ** iteration))
+
+    def _trace(self, iteration, sink):
+        g = self.grid
+        n, dep, rays = trace_photons(self.ctx, g.lookup_state(), g.data_slot[: g.n_nodes], self._n_photons(iteration),
+                                     iteration, sink)
+        self.info["photons"] += n
+        self.info["deposits"] += dep
+        self.info["photon_rays"] += rays
+
+    def _initial_data(self, pilot):
+        g = self.grid
+        kept = []
+        self._trace(0, lambda node, b, v, x: kept.append((b.copy(), v.copy(), x.copy())))
+        if not kept:
+            return
+        bins = np.concatenate([k[0] for k in kept])
+        val = np.concatenate([k[1] for k in kept])
+        x = np.concatenate([k[2] for k in kept])
+        g.split_median(x, self.c, self.max_levels)
+        g.node_count[:] = 0.0
+        g.accumulate(g.locate(x), bins, val)
+
+    def _iterate_data(self):
+        g = self.grid
+        self._trace(self.iteration, lambda node, b, v, x: g.accumulate(node, b, v))

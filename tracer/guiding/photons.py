@@ -1,0 +1,201 @@
+"""Photons: light paths traced from the emitters, binned by the voxels they land in (eq. 10).
+
+An emitter is chosen by power (the light tables NEE uses). From a triangle, the photon leaves a
+point uniform by area in a cosine-distributed direction on the emitting side, carrying
+Le * A * pi / P(triangle). From the environment, a direction is drawn by the environment's own
+importance sampling and the photon starts on a disk of the bounding sphere's radius R,
+perpendicular to it and outside the scene, carrying Le * pi R^2 / pdf(direction). Bounces sample
+the BSDF in importance mode (the adjoint), with Russian roulette on the throughput from the
+`rr_depth`-th hit on.
+
+At every hit on a non-delta surface whose voxel has a data slot, the photon deposits its power
+(luminance) in the bin of the direction it arrived from. Photons are traced as a wavefront, like
+camera paths; `trace_photons` hands each bounce's deposits to a sink.
+"""
+import math
+
+import numpy as np
+from numba import prange
+
+from .. import bsdfs
+from .._jit import kernel
+from ..lights import sample_light
+from ..rng import P_DIR, P_LIGHT, P_POS, P_RR, photon_dim, photon_key, uniform
+from ..sampling import (
+    dot,
+    frame,
+    sample_concentric_disk,
+    sample_cosine_hemisphere,
+    sample_distribution_1d,
+    sample_uniform_triangle,
+    to_local,
+    to_world,
+)
+from .directional import direction_bin
+from .spatial import find_voxel
+
+
+@kernel
+def emit(lt, tri, centre, radius, eps, seed, iteration, g0, key, o, d, power, thr, depth):
+    """Photons g0 .. g0+n-1 of an iteration: origin, direction, power (RGB), throughput 1."""
+    n = key.shape[0]
+    for i in prange(n):
+        k = photon_key(seed, iteration, g0 + i)
+        key[i] = k
+        depth[i] = 0
+        for c in range(3):
+            thr[i, c] = 1.0
+            power[i, c] = 0.0
+            o[i, c] = centre[c]
+            d[i, c] = 0.0
+        d[i, 2] = 1.0
+        u_sel = uniform(k, P_LIGHT)
+        if u_sel < lt.p_env:
+            # From the environment: a direction by the environment's sampling, a disk of radius R
+            ws, _, rad, pdf = sample_light(lt, tri, (centre[0], centre[1], centre[2]), u_sel,
+                                           uniform(k, P_POS), uniform(k, P_POS + 1))
+            if not (pdf > 0.0):
+                continue
+            s, t = frame(ws)
+            dx, dy = sample_concentric_disk(uniform(k, P_DIR), uniform(k, P_DIR + 1))
+            area = math.pi * radius * radius
+            for c in range(3):
+                o[i, c] = centre[c] + radius * (1.01 * ws[c] + dx * s[c] + dy * t[c])
+                d[i, c] = -ws[c]
+                power[i, c] = rad[c] * area / pdf
+            continue
+        # From a triangle chosen by power, a point by area, a cosine-distributed direction
+        u = min((u_sel - lt.p_env) / (1.0 - lt.p_env), 1.0 - 1e-12)
+        _, _, li = sample_distribution_1d(lt.func, lt.cdf, u)
+        p_sel = (1.0 - lt.p_env) * (lt.cdf[li + 1] - lt.cdf[li])
+        if not (p_sel > 0.0):
+            continue
+        tr = lt.tri[li]
+        b1, b2 = sample_uniform_triangle(uniform(k, P_POS), uniform(k, P_POS + 1))
+        b0 = 1.0 - b1 - b2
+        nrm = (lt.normal[li, 0], lt.normal[li, 1], lt.normal[li, 2])
+        s, t = frame(nrm)
+        wl = sample_cosine_hemisphere(uniform(k, P_DIR), uniform(k, P_DIR + 1))
+        w = to_world(wl, s, t, nrm)
+        for c in range(3):
+            x = b0 * tri[tr, 0, c] + b1 * tri[tr, 1, c] + b2 * tri[tr, 2, c]
+            o[i, c] = x + eps * nrm[c]
+            d[i, c] = w[c]
+            power[i, c] = lt.radiance[li, c] * lt.area[li] * math.pi / p_sel
+
+
+@kernel
+def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type, mat_param, gs, data_slot,
+            key, power, thr, depth, max_hits, rr_depth, eps, alive, next_o, next_d,
+            dep_node, dep_bin, dep_val, dep_x):
+    """One hit for every active photon: deposit, then sample the BSDF (importance mode) and roulette.
+
+    Entry k of the hit arrays belongs to photon active[k]; writes its deposit (dep_node -1 for
+    none) and its continuation (alive[k], next_o/next_d[k]).
+    """
+    n = active.shape[0]
+    for k in prange(n):
+        i = active[k]
+        alive[k] = False
+        dep_node[k] = -1
+        p = prim[k]
+        if p < 0:
+            continue
+        u1 = b1[k]
+        u2 = b2[k]
+        u0 = 1.0 - u1 - u2
+        x = (u0 * tri[p, 0, 0] + u1 * tri[p, 1, 0] + u2 * tri[p, 2, 0],
+             u0 * tri[p, 0, 1] + u1 * tri[p, 1, 1] + u2 * tri[p, 2, 1],
+             u0 * tri[p, 0, 2] + u1 * tri[p, 1, 2] + u2 * tri[p, 2, 2])
+        ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])
+        m = tri_material[p]
+        win = (-d[k, 0], -d[k, 1], -d[k, 2])  # toward where the photon came from
+        delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
+        pw = (power[i, 0] * thr[i, 0], power[i, 1] * thr[i, 1], power[i, 2] * thr[i, 2])
+        if not delta:
+            node = find_voxel(gs, x)
+            if node >= 0 and data_slot[node] >= 0:
+                dep_node[k] = node
+                dep_bin[k] = direction_bin(win, gs.n_theta, gs.n_phi)
+                dep_val[k] = 0.2126 * pw[0] + 0.7152 * pw[1] + 0.0722 * pw[2]
+                dep_x[k, 0], dep_x[k, 1], dep_x[k, 2] = x
+        dk = depth[i]
+        if dk + 1 >= max_hits:
+            continue
+        s, tt = frame(ng)
+        kk = key[i]
+        wi, wt, pdf, _ = bsdfs.bsdf_sample(mat_type, mat_param, m, to_local(win, s, tt, ng),
+                                          uniform(kk, photon_dim(dk, 0)), uniform(kk, photon_dim(dk, 1)),
+                                          uniform(kk, photon_dim(dk, 2)), False)
+        nb = (thr[i, 0] * wt[0], thr[i, 1] * wt[1], thr[i, 2] * wt[2])
+        bmax = max(nb[0], max(nb[1], nb[2]))
+        if not (bmax > 0.0) or not math.isfinite(bmax):
+            continue
+        if dk + 1 >= rr_depth:
+            q = min(bmax, 0.95)
+            if uniform(kk, photon_dim(dk, P_RR)) >= q:
+                continue
+            nb = (nb[0] / q, nb[1] / q, nb[2] / q)
+        w = to_world(wi, s, tt, ng)
+        sg = eps if dot(w, ng) >= 0.0 else -eps
+        for c in range(3):
+            thr[i, c] = nb[c]
+            next_o[k, c] = x[c] + sg * ng[c]
+            next_d[k, c] = w[c]
+        depth[i] = dk + 1
+        alive[k] = True
+
+
+class PhotonBuffers:
+    def __init__(self, size):
+        self.size = size
+        z3 = lambda: np.zeros((size, 3))  # noqa: E731
+        self.key = np.zeros(size, np.uint64)
+        self.o, self.d, self.power, self.thr = z3(), z3(), z3(), z3()
+        self.depth = np.zeros(size, np.int32)
+        self.alive = np.zeros(size, np.bool_)
+        self.next_o, self.next_d = z3(), z3()
+        self.dep_node = np.zeros(size, np.int64)
+        self.dep_bin = np.zeros(size, np.int64)
+        self.dep_val = np.zeros(size)
+        self.dep_x = z3()
+
+
+def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 << 16, max_hits=None):
+    """Trace `n_photons` photons of guide iteration `iteration`; after every bounce call
+    sink(node, bin, value, x) with that bounce's deposits (arrays of equal length).
+    Returns (photons traced, deposits, rays)."""
+    scene, accel, lt = ctx.scene, ctx.accel, ctx.lights
+    if max_hits is None:
+        max_hits = ctx.max_depth - 1 if ctx.max_depth > 0 else 64
+    max_hits = max(int(max_hits), 1)
+    centre = 0.5 * (scene.bounds[0] + scene.bounds[1])
+    radius = 0.5 * float(np.linalg.norm(scene.bounds[1] - scene.bounds[0])) * 1.01 + ctx.eps
+    buf = PhotonBuffers(min(wave_size, max(n_photons, 1)))
+    deposits = 0
+    rays = 0
+    for g0 in range(0, n_photons, buf.size):
+        n = min(buf.size, n_photons - g0)
+        emit(lt, scene.tri, centre, radius, ctx.eps, ctx.seed, iteration, g0, buf.key[:n], buf.o[:n], buf.d[:n],
+             buf.power[:n], buf.thr[:n], buf.depth[:n])
+        active = np.arange(n)
+        o, d = buf.o[:n].copy(), buf.d[:n].copy()
+        live = np.any(buf.power[:n] > 0.0, axis=1)
+        active, o, d = active[live], o[live], d[live]
+        while active.size:
+            t, prim, b1, b2 = accel.intersect(o, d)
+            rays += active.size
+            m = active.size
+            scatter(active, d, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
+                    scene.materials.type, scene.materials.param, gs, data_slot, buf.key, buf.power, buf.thr,
+                    buf.depth, max_hits, ctx.rr_depth, ctx.eps, buf.alive[:m], buf.next_o[:m], buf.next_d[:m],
+                    buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m])
+            has = buf.dep_node[:m] >= 0
+            if has.any():
+                deposits += int(has.sum())
+                sink(buf.dep_node[:m][has], buf.dep_bin[:m][has], buf.dep_val[:m][has], buf.dep_x[:m][has])
+            keep = np.flatnonzero(buf.alive[:m])
+            active = active[keep]
+            o = buf.next_o[:m][keep]
+            d = buf.next_d[:m][keep]
+    return n_photons, deposits, rays

@@ -1,0 +1,367 @@
+"""The hierarchical grid of section 7.1 and the state the integrator's kernels read.
+
+Space is a uniform grid of cubic cells over the bounds that the pilot pass's camera paths
+reach; every cell is the root of a small binary tree whose leaves are the voxels. All nodes
+live in flat arrays (node i of cell c is c itself for the roots; children are appended in
+pairs, the right one right after the left one), so a lookup is O(1) for the cell plus a short
+descent. A voxel holds a data slot (its histogram: power and counts per direction bin) only
+while camera paths visit it, and a sampling map (a flat CDF, see `directional`) once its data
+is reconstructed. Slots are recycled when a voxel goes unvisited for two iterations.
+
+Splits alternate x, y, z with the depth below the cell. `split_median` splits at the median of
+the points it is given (the initialisation phase, while points are kept), `split_mid` at the
+middle plane (later iterations); a split's children inherit the parent's data halved, its map
+and its mixing weight, and must be visited again to stay in use.
+"""
+from typing import NamedTuple
+
+import numpy as np
+from numba import prange
+
+from .._jit import jit, kernel
+from .directional import map_pdf, map_sample
+
+
+class GuideState(NamedTuple):
+    """Arrays the integrator's kernels read; `empty_state()` is 'no guide'."""
+
+    lo: np.ndarray  # (3,) float64 grid origin
+    inv_cell: np.ndarray  # (3,) float64 1 / cell side
+    res: np.ndarray  # (3,) int64 cells per axis; (0, 0, 0) = no grid
+    child: np.ndarray  # (N,) int32 left child of a node (right = left + 1), -1 at leaves
+    axis: np.ndarray  # (N,) int32 split axis
+    split: np.ndarray  # (N,) float64 split plane (x[axis] >= split goes right)
+    slot: np.ndarray  # (N,) int32 sampling map of a leaf, -1 where it has none
+    alpha: np.ndarray  # (N,) float64 probability of BSDF sampling at a leaf with a map
+    cdf: np.ndarray  # (S, K + 1) float32 flat CDFs of the maps
+    n_theta: int
+    n_phi: int
+
+
+def empty_state(n_theta=2, n_phi=2):
+    """A state with no grid: every lookup misses, so every vertex samples its BSDF."""
+    return GuideState(np.zeros(3), np.ones(3), np.zeros(3, np.int64), np.full(1, -1, np.int32),
+                      np.zeros(1, np.int32), np.zeros(1), np.full(1, -1, np.int32), np.ones(1),
+                      np.zeros((1, n_theta * n_phi + 1), np.float32), int(n_theta), int(n_phi))
+
+
+@jit(inline="always")
+def find_voxel(gs, x):
+    """Leaf node holding point x, or -1 outside the grid (or without a grid)."""
+    if gs.res[0] == 0:
+        return -1
+    c0 = int(np.floor((x[0] - gs.lo[0]) * gs.inv_cell[0]))
+    c1 = int(np.floor((x[1] - gs.lo[1]) * gs.inv_cell[1]))
+    c2 = int(np.floor((x[2] - gs.lo[2]) * gs.inv_cell[2]))
+    if c0 < 0 or c1 < 0 or c2 < 0 or c0 >= gs.res[0] or c1 >= gs.res[1] or c2 >= gs.res[2]:
+        return -1
+    node = (c2 * gs.res[1] + c1) * gs.res[0] + c0
+    while gs.child[node] >= 0:  # bounded by the tree depth
+        a = gs.axis[node]
+        node = gs.child[node] + (1 if x[a] >= gs.split[node] else 0)
+    return node
+
+
+@jit(inline="always")
+def voxel_sample(gs, node, u0, u1):
+    """(direction, pdf) from the map of leaf `node` (which must have one)."""
+    return map_sample(gs.cdf, gs.slot[node], gs.n_theta, gs.n_phi, u0, u1)
+
+
+@jit(inline="always")
+def voxel_pdf(gs, node, d):
+    return map_pdf(gs.cdf, gs.slot[node], gs.n_theta, gs.n_phi, d)
+
+
+# --- The sampler contract of DESIGN.md: sample(state, x, n, wo, u), pdf(state, x, n, wi) -------
+@jit(inline="always")
+def guide_sample(gs, x, n, wo, u0, u1):
+    """Sample a world direction from the guide at x: (wi, pdf); pdf 0 where there is no map."""
+    node = find_voxel(gs, x)
+    if node < 0 or gs.slot[node] < 0:
+        return (0.0, 0.0, 1.0), 0.0
+    return voxel_sample(gs, node, u0, u1)
+
+
+@jit(inline="always")
+def guide_pdf(gs, x, n, wi):
+    node = find_voxel(gs, x)
+    if node < 0 or gs.slot[node] < 0:
+        return 0.0
+    return voxel_pdf(gs, node, wi)
+
+
+@kernel
+def guide_sample_batch(gs, x, n, wo, u):
+    """Batch guide_sample: x, n, wo (m, 3), u (m, 2) -> (wi (m, 3), pdf (m,))."""
+    m = x.shape[0]
+    wi = np.empty((m, 3))
+    pdf = np.empty(m)
+    for i in prange(m):
+        d, p = guide_sample(gs, (x[i, 0], x[i, 1], x[i, 2]), (n[i, 0], n[i, 1], n[i, 2]),
+                            (wo[i, 0], wo[i, 1], wo[i, 2]), u[i, 0], u[i, 1])
+        wi[i, 0], wi[i, 1], wi[i, 2] = d
+        pdf[i] = p
+    return wi, pdf
+
+
+@kernel
+def guide_pdf_batch(gs, x, n, wi):
+    m = x.shape[0]
+    pdf = np.empty(m)
+    for i in prange(m):
+        pdf[i] = guide_pdf(gs, (x[i, 0], x[i, 1], x[i, 2]), (n[i, 0], n[i, 1], n[i, 2]),
+                           (wi[i, 0], wi[i, 1], wi[i, 2]))
+    return pdf
+
+
+@kernel
+def locate_batch(gs, x):
+    """Leaf node of every point x (m, 3), -1 outside the grid."""
+    m = x.shape[0]
+    out = np.empty(m, np.int64)
+    for i in prange(m):
+        out[i] = find_voxel(gs, (x[i, 0], x[i, 1], x[i, 2]))
+    return out
+
+
+@jit
+def accumulate(node, bins, value, node_slot, power, count, node_count):
+    """Histogram entries (node, bin, value) into the data slots of their nodes; entries whose node
+    has no slot are dropped. Sequential: entries may share a bin."""
+    kept = 0
+    for i in range(node.shape[0]):
+        nd = node[i]
+        if nd < 0:
+            continue
+        s = node_slot[nd]
+        if s < 0:
+            continue
+        power[s, bins[i]] += value[i]
+        count[s, bins[i]] += 1.0
+        node_count[nd] += 1.0
+        kept += 1
+    return kept
+
+
+class HierarchicalGrid:
+    """Uniform cells, each the root of a binary tree; data slots for the visited voxels."""
+
+    def __init__(self, lo, hi, resolution, n_theta, n_phi):
+        lo = np.asarray(lo, dtype=np.float64)
+        hi = np.asarray(hi, dtype=np.float64)
+        ext = np.maximum(hi - lo, 1e-9)
+        side = float(np.linalg.norm(ext)) / float(resolution)
+        res = np.maximum(np.ceil(ext / side - 1e-9).astype(np.int64), 1)
+        centre = 0.5 * (lo + hi)
+        self.lo = centre - 0.5 * res * side
+        self.side = side
+        self.res = res
+        self.n_theta, self.n_phi = int(n_theta), int(n_phi)
+        self.K = self.n_theta * self.n_phi
+        self.n_cells = int(np.prod(res))
+        self.n_nodes = self.n_cells
+        cap = max(2 * self.n_cells, 64)
+        self.child = np.full(cap, -1, np.int32)
+        self.axis = np.zeros(cap, np.int32)
+        self.split = np.zeros(cap)
+        self.depth = np.zeros(cap, np.int32)
+        self.box_lo = np.zeros((cap, 3))
+        self.box_hi = np.zeros((cap, 3))
+        ijk = np.stack(np.unravel_index(np.arange(self.n_cells), tuple(res[::-1]))[::-1], axis=1)  # (x, y, z)
+        self.box_lo[: self.n_cells] = self.lo + ijk * side
+        self.box_hi[: self.n_cells] = self.lo + (ijk + 1) * side
+        self.node_count = np.zeros(cap)  # samples (photons or path vertices) binned, halved on a split
+        self.last_visit = np.full(cap, -(1 << 30), np.int32)  # iteration of the last camera vertex
+        self.alpha = np.full(cap, 0.5)
+        self.mis_sum = np.zeros((cap, 2))  # sum of L_b per strategy (0 BSDF, 1 guide), eq. 14
+        self.mis_n = np.zeros((cap, 2))
+        self.data_slot = np.full(cap, -1, np.int32)  # histogram slot of a leaf
+        self.map_ok = np.zeros(cap, np.bool_)  # the slot's CDF is usable
+        scap = 64
+        self.power = np.zeros((scap, self.K), np.float32)
+        self.count = np.zeros((scap, self.K), np.float32)
+        self.prev = np.zeros((scap, self.K), np.float32)  # the previous iteration's normalised map
+        self.cdf = np.zeros((scap, self.K + 1), np.float32)
+        self.slot_node = np.full(scap, -1, np.int64)
+        self.free = []
+        self.n_slots = 0
+
+    # --- storage ---------------------------------------------------------------------------
+    def _grow_nodes(self, need):
+        cap = self.child.shape[0]
+        if need <= cap:
+            return
+        new = max(need, 2 * cap)
+        for name in ("child", "axis", "split", "depth", "box_lo", "box_hi", "node_count", "last_visit",
+                     "alpha", "mis_sum", "mis_n", "data_slot", "map_ok"):
+            a = getattr(self, name)
+            fill = {"child": -1, "data_slot": -1, "last_visit": -(1 << 30), "alpha": 0.5}.get(name, 0)
+            b = np.full((new,) + a.shape[1:], fill, a.dtype)
+            b[:cap] = a
+            setattr(self, name, b)
+
+    def _new_slot(self, node):
+        if self.free:
+            s = self.free.pop()
+        else:
+            s = self.n_slots
+            self.n_slots += 1
+            cap = self.power.shape[0]
+            if self.n_slots > cap:
+                for name in ("power", "count", "prev", "cdf", "slot_node"):
+                    a = getattr(self, name)
+                    b = np.zeros((2 * cap,) + a.shape[1:], a.dtype) if name != "slot_node" else np.full(2 * cap, -1, a.dtype)
+                    b[:cap] = a
+                    setattr(self, name, b)
+        self.power[s] = 0.0
+        self.count[s] = 0.0
+        self.prev[s] = 0.0
+        self.cdf[s] = 0.0
+        self.slot_node[s] = node
+        self.data_slot[node] = s
+        self.map_ok[node] = False
+        return s
+
+    def release(self, node):
+        s = self.data_slot[node]
+        if s >= 0:
+            self.slot_node[s] = -1
+            self.free.append(int(s))
+            self.data_slot[node] = -1
+            self.map_ok[node] = False
+
+    def leaves(self):
+        n = self.n_nodes
+        return np.flatnonzero(self.child[:n] < 0)
+
+    def slots_in_use(self):
+        return np.flatnonzero(self.slot_node[: self.n_slots] >= 0)
+
+    def memory_bytes(self):
+        arrays = (self.child, self.axis, self.split, self.depth, self.box_lo, self.box_hi, self.node_count,
+                  self.last_visit, self.alpha, self.mis_sum, self.mis_n, self.data_slot, self.map_ok,
+                  self.power, self.count, self.prev, self.cdf, self.slot_node)
+        return int(sum(a.nbytes for a in arrays))
+
+    # --- what the kernels read ---------------------------------------------------------------
+    def state(self):
+        n = self.n_nodes
+        slot = np.where(self.map_ok[:n], self.data_slot[:n], -1).astype(np.int32)
+        return GuideState(self.lo.copy(), np.full(3, 1.0 / self.side), self.res.astype(np.int64),
+                          self.child[:n], self.axis[:n], self.split[:n], slot, self.alpha[:n],
+                          self.cdf[: max(self.n_slots, 1)], self.n_theta, self.n_phi)
+
+    def lookup_state(self):
+        """A state for locating points only (no maps)."""
+        s = self.state()
+        return s._replace(slot=np.full(self.n_nodes, -1, np.int32))
+
+    def locate(self, x):
+        return locate_batch(self.lookup_state(), np.ascontiguousarray(x, dtype=np.float64))
+
+    # --- visits, slots ------------------------------------------------------------------------
+    def visit(self, nodes, iteration):
+        """Camera vertices landed in these leaves: they are valid now (slots for new ones)."""
+        nodes = np.unique(nodes[nodes >= 0])
+        self.last_visit[nodes] = iteration
+        for nd in nodes[self.data_slot[nodes] < 0]:
+            self._new_slot(int(nd))
+
+    def recycle(self, iteration, after=2):
+        """Release the slots of leaves that no camera vertex visited in the last `after` iterations."""
+        n = self.n_nodes
+        stale = np.flatnonzero((self.data_slot[:n] >= 0) & (self.last_visit[:n] <= iteration - after))
+        for nd in stale:
+            self.release(int(nd))
+        return stale.size
+
+    # --- splits -----------------------------------------------------------------------------
+    def _split(self, node, value):
+        self._grow_nodes(self.n_nodes + 2)
+        a = int(self.depth[node] % 3)
+        c = self.n_nodes
+        self.n_nodes += 2
+        self.child[node] = c
+        self.axis[node] = a
+        self.split[node] = value
+        for j in (c, c + 1):
+            self.child[j] = -1
+            self.depth[j] = self.depth[node] + 1
+            self.box_lo[j] = self.box_lo[node]
+            self.box_hi[j] = self.box_hi[node]
+            self.node_count[j] = 0.5 * self.node_count[node]
+            self.last_visit[j] = self.last_visit[node]
+            self.alpha[j] = self.alpha[node]
+            self.mis_sum[j] = 0.5 * self.mis_sum[node]
+            self.mis_n[j] = 0.5 * self.mis_n[node]
+        self.box_hi[c, a] = value
+        self.box_lo[c + 1, a] = value
+        s = self.data_slot[node]
+        if s >= 0:  # children inherit the data halved and the map; the parent keeps nothing
+            self.power[s] *= 0.5
+            self.count[s] *= 0.5
+            self.data_slot[node] = -1
+            self.data_slot[c] = s
+            self.slot_node[s] = c
+            self.map_ok[c] = self.map_ok[node]
+            s2 = self._new_slot(c + 1)
+            for name in ("power", "count", "prev", "cdf"):
+                getattr(self, name)[s2] = getattr(self, name)[s]
+            self.map_ok[c + 1] = self.map_ok[node]
+            self.map_ok[node] = False
+        return c
+
+    def split_mid(self, threshold, max_levels=3):
+        """Split every leaf with a slot whose count exceeds threshold at its middle plane, again in
+        the children (counts halved) up to max_levels new levels. Returns the number of splits."""
+        n_split = 0
+        todo = [(int(nd), 0) for nd in self.leaves() if self.data_slot[nd] >= 0 and self.node_count[nd] > threshold]
+        while todo:
+            nd, lvl = todo.pop()
+            a = int(self.depth[nd] % 3)
+            c = self._split(nd, 0.5 * (self.box_lo[nd, a] + self.box_hi[nd, a]))
+            n_split += 1
+            if lvl + 1 < max_levels:
+                for j in (c, c + 1):
+                    if self.node_count[j] > threshold:
+                        todo.append((j, lvl + 1))
+        return n_split
+
+    def split_median(self, points, threshold, max_levels=3):
+        """Initialisation phase: split leaves with slots that hold more than threshold of `points`
+        (m, 3) at the median point (middle plane where the median cannot separate them)."""
+        nodes = self.locate(points)
+        order = np.argsort(nodes, kind="stable")
+        nodes_sorted = nodes[order]
+        starts = np.searchsorted(nodes_sorted, np.arange(self.n_nodes + 1))
+        n_split = 0
+        todo = []
+        for nd in self.leaves():
+            k0, k1 = starts[nd], starts[nd + 1]
+            if k1 - k0 > threshold and self.data_slot[nd] >= 0:
+                todo.append((int(nd), points[order[k0:k1]], 0))
+        while todo:
+            nd, pts, lvl = todo.pop()
+            a = int(self.depth[nd] % 3)
+            lo, hi = self.box_lo[nd, a], self.box_hi[nd, a]
+            v = float(np.median(pts[:, a]))
+            right = pts[:, a] >= v
+            if not (lo < v < hi) or right.all() or not right.any():
+                v = 0.5 * (lo + hi)
+                right = pts[:, a] >= v
+            c = self._split(nd, v)
+            n_split += 1
+            self.node_count[c] = float((~right).sum())
+            self.node_count[c + 1] = float(right.sum())
+            if lvl + 1 < max_levels:
+                for j, sub in ((c, pts[~right]), (c + 1, pts[right])):
+                    if sub.shape[0] > threshold:
+                        todo.append((j, sub, lvl + 1))
+        return n_split
+
+    # --- data -----------------------------------------------------------------------------------
+    def accumulate(self, nodes, bins, values):
+        return accumulate(np.ascontiguousarray(nodes, dtype=np.int64), np.ascontiguousarray(bins, dtype=np.int64),
+                          np.ascontiguousarray(values, dtype=np.float64), self.data_slot[: self.n_nodes],
+                          self.power, self.count, self.node_count[: self.n_nodes])
