@@ -147,6 +147,18 @@ def summary_table(all_records, scenes, methods, times, floors):
                 cells.append(f"{v:.3g} ({ratio:.2f})" if np.isfinite(ratio) else f"{v:.3g}")
             lines.append(f"| {m} | " + " | ".join(cells) + " |")
         lines.append("")
+        guided = [m for m in methods if m != "bsdf"]
+        if guided:
+            lines += ["| method (at the largest time budget) | spp | learning s | inference s | guide memory MB |",
+                      "|---|---|---|---|---|"]
+            for m in guided:
+                rr = [r for r in recs if r["method"] == m and r["time_budget"] == max(times)]
+                if rr:
+                    lines.append(f"| {m} | {np.median([r['spp'] for r in rr]):.0f} | "
+                                 f"{np.median([r['time_learning'] for r in rr]):.2f} | "
+                                 f"{np.median([r['time_inference'] for r in rr]):.2f} | "
+                                 f"{max(r['guide_memory_bytes'] for r in rr) / 1e6:.0f} |")
+            lines.append("")
     return "\n".join(lines)
 
 
@@ -184,8 +196,9 @@ def main(argv=None):
                         recs.append(run_one(scene, m, seed, ref, time_budget=t))
                         print(f"{name} {m} seed {seed} time {t:g}s: {recs[-1]['spp']} spp, "
                               f"relMSE {recs[-1]['metrics']['relMSE']:.4g}", flush=True)
-            spps = ([int(s) for s in a.spp.split(",")] if a.spp else
-                    sorted({r["spp"] for r in recs if r["method"] == "bsdf"}))
+            spps = ([int(s) for s in a.spp.split(",")] if a.spp else  # bsdf's median spp per time budget
+                    sorted({int(np.median([r["spp"] for r in recs if r["method"] == "bsdf" and r["time_budget"] == t]))
+                            for t in times}))
             for m in methods:
                 for seed in range(a.seeds):
                     for n in spps:

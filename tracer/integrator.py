@@ -99,16 +99,18 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
     gs is the guide's state (an empty one for plain BSDF sampling); with `record`, the vertex
     of entry k goes to record rec_base + k (strategy -1 where nothing was sampled) in the
     r_* arrays (the fields of `Records`, passed one by one: Numba 0.68's parallel loops can drop
-    writes into arrays that arrive inside a NamedTuple). prev_rec[i] is the record of the path's
-    last vertex: emission found by its sampled direction counts there in full, not MIS-weighted
-    (the vertex's own NEE, which covers the rest, is not in its record).
+    writes into arrays that arrive inside a NamedTuple). record: 0 none, 1 records of the full
+    incident radiance, 2 of the radiance less the emission the direction hits directly (the part
+    NEE samples). prev_rec[i] is the record of the path's last vertex: emission found by its
+    sampled direction counts there in full (mode 1), not MIS-weighted, since the vertex's own NEE,
+    which covers the rest, is not in its record; or not at all (mode 2).
     """
     n = active.shape[0]
     for k in prange(n):
         i = active[k]
         alive[k] = False
         has_shadow[k] = False
-        if record:
+        if record > 0:
             r_strategy[rec_base + k] = -1
         dk = depth[i]                                   # bounces so far (0 at the first hit)
         wray = (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2])  # direction the path arrived along
@@ -123,9 +125,10 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                     w = power_heuristic(prev_pdf[i], env_pdf(lt, wray))
                 for c in range(3):
                     L[i, c] += b[c] * le[c] * w
-                if record and prev_rec[i] >= 0:
+                if record > 0 and prev_rec[i] >= 0:
+                    x_le = -(1.0 - w) if record == 1 else w
                     for c in range(3):
-                        r_L0[prev_rec[i], c] -= b[c] * le[c] * (1.0 - w)
+                        r_L0[prev_rec[i], c] += b[c] * le[c] * x_le
             continue
 
         # Hit point (from barycentrics: on the triangle's plane) and geometric normal
@@ -147,9 +150,10 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 w = power_heuristic(prev_pdf[i], triangle_light_pdf(lt, p, t[k] * t[k], cos_o))
             for c in range(3):
                 L[i, c] += b[c] * le[c] * w
-            if record and prev_rec[i] >= 0:
+            if record > 0 and prev_rec[i] >= 0:
+                x_le = -(1.0 - w) if record == 1 else w
                 for c in range(3):
-                    r_L0[prev_rec[i], c] -= b[c] * le[c] * (1.0 - w)
+                    r_L0[prev_rec[i], c] += b[c] * le[c] * x_le
 
         # AOVs at the first hit: albedo, normal facing the camera, distance
         if dk == 0:
@@ -234,9 +238,9 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             ok = False
 
         # Record the vertex for a guide that learns (also when the path ends here: its radiance is 0)
-        if record:
+        if record > 0:
             prev_rec[i] = -1
-        if record and not delta and pdf > 0.0:
+        if record > 0 and not delta and pdf > 0.0:
             r = rec_base + k
             prev_rec[i] = r
             r_strategy[r] = strategy
@@ -438,9 +442,10 @@ class Stats:
         return t1
 
 
-def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None):
+def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True):
     """Trace paths g0 .. g0+n-1 of the pass that starts at sample index sample0; add to film.
-    ctx.guide_state steers the sampling; `observe(records)`, if given, gets the wave's vertices."""
+    ctx.guide_state steers the sampling; `observe(records)`, if given, gets the wave's vertices,
+    whose radiance includes the emission their direction hits directly only if `direct`."""
     scene, accel, lights = ctx.scene, ctx.accel, ctx.lights
     t0 = time.perf_counter()
     init_paths(ctx.cam, scene.width, scene.height, ctx.crop, ctx.jitter, ctx.seed, sample0, g0, buf.pix[:n], buf.key[:n],
@@ -450,7 +455,7 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None):
     active[:n] = np.arange(n)
     n_active = n
     gs = ctx.guide_state
-    record = observe is not None
+    record = 0 if observe is None else (1 if direct else 2)
     rec = buf.records
     n_rec = 0
     t0 = stats.tick("camera", t0)
@@ -461,7 +466,7 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None):
         t, prim, b1, b2 = accel.intersect(ro, rd)
         stats.rays += n_active
         t0 = stats.tick("intersect", t0)
-        if record and n_rec + n_active > rec.strategy.shape[0]:
+        if record > 0 and n_rec + n_active > rec.strategy.shape[0]:
             rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
         shade(active[:n_active], ro, rd, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
               scene.materials.type, scene.materials.param, lights, buf.beta, buf.L, buf.depth,
@@ -476,14 +481,14 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None):
         t0 = stats.tick("compact", t0)
         if ns:
             occ = accel.occluded(buf.sp_o[:ns], buf.sp_d[:ns], buf.sp_tmax[:ns])
-            add_unoccluded(buf.sp_path[:ns], occ, buf.sp_L[:ns], buf.L, buf.sp_entry[:ns], rec.L0, n_rec, record)
+            add_unoccluded(buf.sp_path[:ns], occ, buf.sp_L[:ns], buf.L, buf.sp_entry[:ns], rec.L0, n_rec, record > 0)
             stats.shadow_rays += ns
             t0 = stats.tick("occluded", t0)
-        if record:
+        if record > 0:
             n_rec += n_active
         n_active = n_next
     stats.nonfinite += sanitize(buf.L[:n])
-    if record and n_rec:
+    if record > 0 and n_rec:
         head = rec.head(n_rec)
         finalize_records(head.strategy, head.path, head.beta, head.L0, head.radiance, buf.L)
         observe(head)

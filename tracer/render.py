@@ -176,7 +176,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
         total = pass_spp * npix
         for g0 in range(0, total, buf.size):
             n = min(buf.size, total - g0)
-            trace_wave(ctx, buf, film, state["sample0"], g0, n, stats, observe=g.observe if learn else None)
+            trace_wave(ctx, buf, film, state["sample0"], g0, n, stats, observe=g.observe if learn else None,
+                       direct=getattr(g, "learn_direct", True))
             if bar is not None:
                 bar.update(n / npix)
         state["sample0"] += pass_spp

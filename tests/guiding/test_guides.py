@@ -117,10 +117,14 @@ def test_records_carry_the_incident_radiance(tmp_path):
 
     ctx = _Context(scene, make_accel("embree", scene.tri), build_lights(scene), 5, -1, 3, "box", (0, 0, 16, 16))
     n = 16 * 16 * 64
-    got = []
-    trace_wave(ctx, WaveBuffers(n), Film(16, 16), 0, 0, n, Stats(), observe=lambda rec: got.append(rec))
-    rec = got[0]
-    first = rec.radiance[:n][rec.strategy[:n] >= 0].astype(np.float64)
-    assert first.size > 0.9 * n
-    assert (rec.strategy[:n] == 0).all() or (rec.strategy[:n] <= 0).all()  # no guide: BSDF only
-    assert_z(first.mean(), first.var(ddof=1) / first.size, le / (1 - a), what="recorded radiance")
+    # direct=True: the full incident radiance; direct=False: less the emission hit directly
+    for direct, expected in ((True, le / (1 - a)), (False, le * a / (1 - a))):
+        got = []
+        trace_wave(ctx, WaveBuffers(n), Film(16, 16), 0, 0, n, Stats(), observe=lambda rec: got.append(rec),
+                   direct=direct)
+        rec = got[0]
+        first = rec.radiance[:n][rec.strategy[:n] >= 0].astype(np.float64)
+        assert first.size > 0.9 * n
+        assert (rec.strategy[:n] <= 0).all()  # no guide: BSDF only
+        assert_z(first.mean(), first.var(ddof=1) / first.size, expected, n_tests=2,
+                 what=f"recorded radiance (direct={direct})")

@@ -47,7 +47,7 @@ def warm_up_guides(ctx):
     """Compile (or load from the cache) the kernels guides run, before a render's clock starts."""
     import numpy as np
 
-    from .directional import bin_of_batch, build_cdfs
+    from .directional import bin_of_batch, build_tables
     from .photons import trace_photons
     from .spatial import HierarchicalGrid, empty_state
 
@@ -55,4 +55,10 @@ def warm_up_guides(ctx):
     grid = HierarchicalGrid(np.zeros(3), np.ones(3), 2, 2, 2)
     grid.visit(grid.locate(np.full((1, 3), 0.5)), 0)
     grid.accumulate(np.zeros(1, np.int64), bin_of_batch(np.array([[0.0, 0.0, 1.0]]), 2, 2), np.ones(1))
-    build_cdfs(grid.power[:1].reshape(1, 2, 2))
+    build_tables(grid.power[:1].reshape(1, 2, 2))
+    from .histogram import _mis_stats
+    from .reconstruct import Gaussian
+
+    Gaussian(1.0).reconstruct(np.zeros((1, 4, 4), np.float32), None, None)
+    _mis_stats(np.zeros(1, np.int32), np.zeros(1, np.int8), np.zeros(1, np.float32), np.zeros(1, np.float32),
+               np.zeros((1, 2)), np.zeros((1, 2)))

@@ -10,12 +10,17 @@ Both follow Algorithm 1 of Zhu et al. 2021 (Photon-Driven Neural Reconstruction 
   make the voxels they visit valid and feed each voxel's mixing weight (eq. 14). Then the data of
   the iteration is binned into the valid voxels, voxels holding more than c sqrt(2^t) samples are
   split at the middle plane (at most 3 new levels), and every valid voxel's map is reconstructed
-  (normalise, then the `reconstruct` filter) and turned into a CDF.
+  (normalise, then the `reconstruct` filter) and turned into an alias table.
 - `photon`: 2^t N_p photons per iteration (N_p = `photons_per_pixel` x pixels), their power
   binned by arrival direction (eq. 10); power maps accumulate over the iterations.
 - `grid`: each camera vertex adds radiance / pdf along its sampled direction (the estimate of the
   incident radiance integrated over the bin, as in practical path guiding); the maps are rebuilt
   from every iteration's vertices alone.
+
+Direct light: next-event estimation already samples the light that a vertex receives straight
+from the emitters, so by default (`direct` 0) the maps learn the rest: photons deposit from their
+second hit on, and a camera vertex's record leaves out the emission its direction hits. With
+`direct` 1 the maps learn the full incident light, as in the paper.
 
 The render loop (tracer/render.py) runs the schedule; this module only learns. Mixing weights:
 a = 0.5 until a voxel has `mis_min_samples` vertices of both strategies, then
@@ -27,9 +32,11 @@ import time
 
 import numpy as np
 
-from .._jit import jit
+from numba import prange
+
+from .._jit import jit, kernel
 from ..errors import SettingsError
-from .directional import bin_of_batch, build_cdfs
+from .directional import bin_of_batch, build_tables
 from .photons import trace_photons
 from .reconstruct import RECONSTRUCTORS, make_reconstructor
 from .spatial import HierarchicalGrid, empty_state
@@ -46,6 +53,7 @@ COMMON = {
     "alpha_max": 0.8,
     "mis_min_samples": 32,  # Q_thr of eq. 14
     "max_levels": 3,  # new tree levels per iteration at most
+    "direct": 0,  # 1: maps learn direct light too; 0: only what NEE does not sample (see below)
 }
 
 
@@ -58,6 +66,30 @@ def _mis_stats(node, strategy, radiance, fcos, mis_sum, mis_n):
             continue
         mis_sum[nd, s] += radiance[i] * fcos[i]
         mis_n[nd, s] += 1.0
+
+
+@kernel
+def _row_sums(a, rows):
+    out = np.zeros(rows.shape[0])
+    for i in prange(rows.shape[0]):
+        t = 0.0
+        for k in range(a.shape[1]):
+            t += a[rows[i], k]
+        out[i] = t
+    return out
+
+
+@kernel
+def _normalised(a, rows):
+    """a[rows] (float32) with every row divided by its sum (rows with a positive sum only)."""
+    out = np.empty((rows.shape[0], a.shape[1]), np.float32)
+    for i in prange(rows.shape[0]):
+        t = 0.0
+        for k in range(a.shape[1]):
+            t += a[rows[i], k]
+        for k in range(a.shape[1]):
+            out[i, k] = a[rows[i], k] / t
+    return out
 
 
 def _int(name, v, lo):
@@ -92,6 +124,9 @@ class HistogramGuide:
         self.alpha_max = _float("alpha_max", s["alpha_max"], self.alpha_min, 1.0)
         self.q_thr = _float("mis_min_samples", s["mis_min_samples"], 1.0)
         self.max_levels = _int("max_levels", s["max_levels"], 0)
+        self.learn_direct = bool(_int("direct", s["direct"], 0))
+        if s["direct"] not in (0, 1):
+            raise SettingsError(f"guide setting direct must be 0 or 1, got {s['direct']!r}")
         if s["reconstruct"] not in RECONSTRUCTORS:
             raise SettingsError(f"guide setting reconstruct: unknown {s['reconstruct']!r}; valid: "
                                 + ", ".join(sorted(RECONSTRUCTORS)))
@@ -159,9 +194,10 @@ class HistogramGuide:
             raise SettingsError(f"map must be {self.map_height}x{self.map_width}, got {m.shape}")
         g = HierarchicalGrid(-np.ones(3), np.ones(3), 1, self.map_height, self.map_width)
         g.visit(np.arange(g.n_cells), 0)
-        cdf, usable = build_cdfs(np.repeat(m[None], g.n_cells, axis=0))
+        q, alias, prob, usable = build_tables(np.repeat(m[None], g.n_cells, axis=0))
         for nd in range(g.n_cells):
-            g.cdf[g.data_slot[nd]] = cdf[nd]
+            s = g.data_slot[nd]
+            g.q[s], g.alias[s], g.prob[s] = q[nd], alias[nd], prob[nd]
             g.map_ok[nd] = usable[nd]
         return g.state()
 
@@ -202,17 +238,15 @@ class HistogramGuide:
         slots = g.slots_in_use()
         if slots.size == 0:
             return
-        power = g.power[slots].astype(np.float64)
-        total = power.sum(axis=1)
-        has = total > 0.0
-        slots, power, total = slots[has], power[has], total[has]
+        total = _row_sums(g.power, slots)
+        slots = slots[total > 0.0]
         if slots.size == 0:
             return
-        maps = (power / total[:, None]).astype(np.float32).reshape(-1, self.map_height, self.map_width)
+        maps = _normalised(g.power, slots).reshape(-1, self.map_height, self.map_width)
         counts = g.count[slots].reshape(maps.shape)
         rec = self.reconstructor.reconstruct(maps, counts, counts > 0)
-        cdf, usable = build_cdfs(rec)
-        g.cdf[slots] = cdf
+        q, alias, prob, usable = build_tables(rec)
+        g.q[slots], g.alias[slots], g.prob[slots] = q, alias, prob
         g.prev[slots] = maps.reshape(slots.size, -1)
         g.map_ok[g.slot_node[slots]] = usable
 
@@ -244,7 +278,8 @@ class GridGuide(HistogramGuide):
     """`--guide grid`: maps learned from camera-path vertices (radiance / pdf per direction bin)."""
 
     name = "grid"
-    DEFAULTS = dict(COMMON, split_c=4000.0)
+    # coarser and smoother than the photon maps: camera-path estimates (radiance / pdf) are noisier
+    DEFAULTS = dict(COMMON, split_c=4000.0, resolution=8, sigma=2.0)
 
     def _splat(self, x, wi, pdf, radiance, nodes=None):
         g = self.grid
@@ -286,7 +321,7 @@ class PhotonGuide(HistogramGuide):
     def _trace(self, iteration, sink):
         g = self.grid
         n, dep, rays = trace_photons(self.ctx, g.lookup_state(), g.data_slot[: g.n_nodes], self._n_photons(iteration),
-                                     iteration, sink)
+                                     iteration, sink, first_hit=self.learn_direct)
         self.info["photons"] += n
         self.info["deposits"] += dep
         self.info["photon_rays"] += rays

@@ -87,11 +87,12 @@ def emit(lt, tri, centre, radius, eps, seed, iteration, g0, key, o, d, power, th
 @kernel
 def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type, mat_param, gs, data_slot,
             key, power, thr, depth, max_hits, rr_depth, eps, alive, next_o, next_d,
-            dep_node, dep_bin, dep_val, dep_x):
+            dep_node, dep_bin, dep_val, dep_x, first_hit):
     """One hit for every active photon: deposit, then sample the BSDF (importance mode) and roulette.
 
     Entry k of the hit arrays belongs to photon active[k]; writes its deposit (dep_node -1 for
-    none) and its continuation (alive[k], next_o/next_d[k]).
+    none) and its continuation (alive[k], next_o/next_d[k]). Photons deposit at their first hit
+    (direct light) only if `first_hit`.
     """
     n = active.shape[0]
     for k in prange(n):
@@ -112,7 +113,7 @@ def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type,
         win = (-d[k, 0], -d[k, 1], -d[k, 2])  # toward where the photon came from
         delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
         pw = (power[i, 0] * thr[i, 0], power[i, 1] * thr[i, 1], power[i, 2] * thr[i, 2])
-        if not delta:
+        if not delta and (first_hit or depth[i] > 0):
             node = find_voxel(gs, x)
             if node >= 0 and data_slot[node] >= 0:
                 dep_node[k] = node
@@ -161,9 +162,11 @@ class PhotonBuffers:
         self.dep_x = z3()
 
 
-def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 << 16, max_hits=None):
+def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 << 16, max_hits=None,
+                  first_hit=True):
     """Trace `n_photons` photons of guide iteration `iteration`; after every bounce call
-    sink(node, bin, value, x) with that bounce's deposits (arrays of equal length).
+    sink(node, bin, value, x) with that bounce's deposits (arrays of equal length); with
+    first_hit False, photons deposit from their second hit on (indirect light only).
     Returns (photons traced, deposits, rays)."""
     scene, accel, lt = ctx.scene, ctx.accel, ctx.lights
     if max_hits is None:
@@ -189,7 +192,7 @@ def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 <<
             scatter(active, d, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
                     scene.materials.type, scene.materials.param, gs, data_slot, buf.key, buf.power, buf.thr,
                     buf.depth, max_hits, ctx.rr_depth, ctx.eps, buf.alive[:m], buf.next_o[:m], buf.next_d[:m],
-                    buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m])
+                    buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m], first_hit)
             has = buf.dep_node[:m] >= 0
             if has.any():
                 deposits += int(has.sum())

@@ -11,17 +11,47 @@ non-negative maps of the same shape (any scale: the caller normalises). These ar
 the paper's network (its S_t, P_t and B_t), so the neural reconstruction of a later issue plugs in
 here, registered in RECONSTRUCTORS.
 
-Maps are full-sphere cylindrical: rows are z = cos(theta) (clamped at the poles), columns are phi
-(periodic). The classical filters here respect that: phi wraps, z does not.
+Maps are full-sphere cylindrical: rows are z = cos(theta), columns are phi (periodic). The
+classical filters here respect that: phi wraps, z is mirrored at the poles.
 
-- `gaussian`: separable Gaussian blur of `sigma` bins (default 1).
+- `gaussian`: separable Gaussian blur of `sigma` bins (default 1); it keeps each map's total.
 - `pullpush`: pull-push (Gortler et al. 1996): empty bins are filled from a pyramid of
   count-weighted averages; bins with data keep their value.
 - `none`: the histogram as it is.
 """
 import numpy as np
+from numba import prange
 
+from .._jit import kernel
 from ..errors import SettingsError, unknown_name
+
+
+@kernel
+def _blur(maps, offs, w, out):
+    """Separable blur of every map (S, n_theta, n_phi) with taps (offs, w): phi periodic, z mirrored
+    at the poles (symmetric taps: the blur keeps each map's total)."""
+    S, nt, nphi = maps.shape
+    for s in prange(S):
+        tmp = np.zeros((nt, nphi))
+        for i in range(nt):
+            for j in range(nphi):
+                acc = 0.0
+                for k in range(offs.shape[0]):
+                    jj = (j - offs[k]) % nphi
+                    acc += w[k] * maps[s, i, jj]
+                tmp[i, j] = acc
+        for i in range(nt):
+            for j in range(nphi):
+                acc = 0.0
+                for k in range(offs.shape[0]):
+                    ii = i - offs[k]
+                    if ii < 0:
+                        ii = -ii - 1
+                    if ii >= nt:
+                        ii = 2 * nt - 1 - ii
+                    ii = min(max(ii, 0), nt - 1)
+                    acc += w[k] * tmp[ii, j]
+                out[s, i, j] = acc
 
 
 class Reconstructor:
@@ -52,15 +82,9 @@ class Gaussian(Reconstructor):
         offs, w = self._taps()
         if offs.size == 1:
             return maps
-        n_theta = maps.shape[1]
-        out = np.zeros_like(maps)
-        for o, wk in zip(offs, w):  # along phi: periodic
-            out += wk * np.roll(maps, int(o), axis=2)
-        blurred = np.zeros_like(maps)
-        for o, wk in zip(offs, w):  # along z: clamped at the poles (mass stays on the sphere)
-            idx = np.clip(np.arange(n_theta) - o, 0, n_theta - 1)
-            blurred += wk * out[:, idx, :]
-        return blurred
+        out = np.empty_like(maps, dtype=np.float32)
+        _blur(np.ascontiguousarray(maps, dtype=np.float32), offs.astype(np.int64), w.astype(np.float64), out)
+        return out
 
     def describe(self):
         return f"gaussian(sigma={self.sigma:g})"

@@ -5,7 +5,7 @@ reach; every cell is the root of a small binary tree whose leaves are the voxels
 live in flat arrays (node i of cell c is c itself for the roots; children are appended in
 pairs, the right one right after the left one), so a lookup is O(1) for the cell plus a short
 descent. A voxel holds a data slot (its histogram: power and counts per direction bin) only
-while camera paths visit it, and a sampling map (a flat CDF, see `directional`) once its data
+while camera paths visit it, and a sampling map (an alias table, see `directional`) once its data
 is reconstructed. Slots are recycled when a voxel goes unvisited for two iterations.
 
 Splits alternate x, y, z with the depth below the cell. `split_median` splits at the median of
@@ -33,7 +33,9 @@ class GuideState(NamedTuple):
     split: np.ndarray  # (N,) float64 split plane (x[axis] >= split goes right)
     slot: np.ndarray  # (N,) int32 sampling map of a leaf, -1 where it has none
     alpha: np.ndarray  # (N,) float64 probability of BSDF sampling at a leaf with a map
-    cdf: np.ndarray  # (S, K + 1) float32 flat CDFs of the maps
+    q: np.ndarray  # (S, K) float32 alias-table thresholds of the maps (see directional)
+    alias: np.ndarray  # (S, K) int16 alias-table aliases
+    prob: np.ndarray  # (S, K) float64 bin probabilities the tables realise
     n_theta: int
     n_phi: int
 
@@ -42,7 +44,8 @@ def empty_state(n_theta=2, n_phi=2):
     """A state with no grid: every lookup misses, so every vertex samples its BSDF."""
     return GuideState(np.zeros(3), np.ones(3), np.zeros(3, np.int64), np.full(1, -1, np.int32),
                       np.zeros(1, np.int32), np.zeros(1), np.full(1, -1, np.int32), np.ones(1),
-                      np.zeros((1, n_theta * n_phi + 1), np.float32), int(n_theta), int(n_phi))
+                      np.zeros((1, n_theta * n_phi), np.float32), np.zeros((1, n_theta * n_phi), np.int16),
+                      np.zeros((1, n_theta * n_phi)), int(n_theta), int(n_phi))
 
 
 @jit(inline="always")
@@ -65,12 +68,12 @@ def find_voxel(gs, x):
 @jit(inline="always")
 def voxel_sample(gs, node, u0, u1):
     """(direction, pdf) from the map of leaf `node` (which must have one)."""
-    return map_sample(gs.cdf, gs.slot[node], gs.n_theta, gs.n_phi, u0, u1)
+    return map_sample(gs.q, gs.alias, gs.prob, gs.slot[node], gs.n_theta, gs.n_phi, u0, u1)
 
 
 @jit(inline="always")
 def voxel_pdf(gs, node, d):
-    return map_pdf(gs.cdf, gs.slot[node], gs.n_theta, gs.n_phi, d)
+    return map_pdf(gs.prob, gs.slot[node], gs.n_theta, gs.n_phi, d)
 
 
 # --- The sampler contract of DESIGN.md: sample(state, x, n, wo, u), pdf(state, x, n, wi) -------
@@ -182,7 +185,9 @@ class HierarchicalGrid:
         self.power = np.zeros((scap, self.K), np.float32)
         self.count = np.zeros((scap, self.K), np.float32)
         self.prev = np.zeros((scap, self.K), np.float32)  # the previous iteration's normalised map
-        self.cdf = np.zeros((scap, self.K + 1), np.float32)
+        self.q = np.zeros((scap, self.K), np.float32)
+        self.alias = np.zeros((scap, self.K), np.int16)
+        self.prob = np.zeros((scap, self.K))
         self.slot_node = np.full(scap, -1, np.int64)
         self.free = []
         self.n_slots = 0
@@ -209,7 +214,7 @@ class HierarchicalGrid:
             self.n_slots += 1
             cap = self.power.shape[0]
             if self.n_slots > cap:
-                for name in ("power", "count", "prev", "cdf", "slot_node"):
+                for name in ("power", "count", "prev", "q", "alias", "prob", "slot_node"):
                     a = getattr(self, name)
                     b = np.zeros((2 * cap,) + a.shape[1:], a.dtype) if name != "slot_node" else np.full(2 * cap, -1, a.dtype)
                     b[:cap] = a
@@ -217,7 +222,9 @@ class HierarchicalGrid:
         self.power[s] = 0.0
         self.count[s] = 0.0
         self.prev[s] = 0.0
-        self.cdf[s] = 0.0
+        self.q[s] = 0.0
+        self.alias[s] = 0
+        self.prob[s] = 0.0
         self.slot_node[s] = node
         self.data_slot[node] = s
         self.map_ok[node] = False
@@ -241,16 +248,17 @@ class HierarchicalGrid:
     def memory_bytes(self):
         arrays = (self.child, self.axis, self.split, self.depth, self.box_lo, self.box_hi, self.node_count,
                   self.last_visit, self.alpha, self.mis_sum, self.mis_n, self.data_slot, self.map_ok,
-                  self.power, self.count, self.prev, self.cdf, self.slot_node)
+                  self.power, self.count, self.prev, self.q, self.alias, self.prob, self.slot_node)
         return int(sum(a.nbytes for a in arrays))
 
     # --- what the kernels read ---------------------------------------------------------------
     def state(self):
         n = self.n_nodes
         slot = np.where(self.map_ok[:n], self.data_slot[:n], -1).astype(np.int32)
+        m = max(self.n_slots, 1)
         return GuideState(self.lo.copy(), np.full(3, 1.0 / self.side), self.res.astype(np.int64),
                           self.child[:n], self.axis[:n], self.split[:n], slot, self.alpha[:n],
-                          self.cdf[: max(self.n_slots, 1)], self.n_theta, self.n_phi)
+                          self.q[:m], self.alias[:m], self.prob[:m], self.n_theta, self.n_phi)
 
     def lookup_state(self):
         """A state for locating points only (no maps)."""
@@ -306,7 +314,7 @@ class HierarchicalGrid:
             self.slot_node[s] = c
             self.map_ok[c] = self.map_ok[node]
             s2 = self._new_slot(c + 1)
-            for name in ("power", "count", "prev", "cdf"):
+            for name in ("power", "count", "prev", "q", "alias", "prob"):
                 getattr(self, name)[s2] = getattr(self, name)[s]
             self.map_ok[c + 1] = self.map_ok[node]
             self.map_ok[node] = False

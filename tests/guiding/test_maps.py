@@ -1,0 +1,96 @@
+"""Directional maps, their alias tables, the reconstruction filters and the hierarchical grid."""
+import numpy as np
+import pytest
+
+from tests.chi2 import histogram_test
+from tracer.errors import SettingsError
+from tracer.guiding.directional import bin_of_batch, build_tables, map_pdf_batch, map_sample_batch
+from tracer.guiding.reconstruct import make_reconstructor
+from tracer.guiding.spatial import HierarchicalGrid
+
+H, W = 8, 16
+
+
+def test_bins_round_trip_and_cover_equal_solid_angles():
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(200_000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    counts = np.bincount(bin_of_batch(d, H, W), minlength=H * W)
+    # uniform directions fill equal-area bins equally
+    passed, msg = histogram_test(counts, np.full(H * W, d.shape[0] / (H * W)))
+    assert passed, msg
+
+
+def test_alias_table_realises_the_map():
+    rng = np.random.default_rng(1)
+    maps = rng.random((5, H, W)) ** 4
+    maps[1, :, :5] = 0.0
+    maps[2] = 0.0
+    maps[3, 2, 3] = 1e6  # one dominant bin
+    q, alias, prob, usable = build_tables(maps)
+    assert list(usable) == [True, True, False, True, True]
+    target = maps.reshape(5, -1) / np.maximum(maps.reshape(5, -1).sum(axis=1, keepdims=True), 1e-300)
+    np.testing.assert_allclose(prob[usable], target[usable], rtol=1e-6, atol=1e-12)
+    assert (prob[1].reshape(H, W)[:, :5] == 0).all() and (prob[2] == 0).all()
+    # sampling frequencies per bin match prob (chi-square), and the pdf matches the bin
+    u = rng.random((400_000, 2))
+    for slot in (0, 1, 3):
+        d, p = map_sample_batch(q, alias, prob, slot, H, W, u)
+        b = bin_of_batch(d, H, W)
+        passed, msg = histogram_test(np.bincount(b, minlength=H * W), prob[slot] * u.shape[0], ntests=3)
+        assert passed, msg
+        np.testing.assert_allclose(p, prob[slot, b] * H * W / (4 * np.pi), rtol=1e-12)
+        np.testing.assert_allclose(map_pdf_batch(prob, slot, H, W, d), p, rtol=1e-12)
+
+
+def test_gaussian_keeps_mass_and_pullpush_fills_holes():
+    rng = np.random.default_rng(2)
+    maps = np.zeros((3, 32, 64), np.float32)
+    maps[:, 5, 7] = 1.0
+    maps[:, 31, 63] = 2.0  # at a pole and at the phi seam
+    counts = (maps > 0).astype(np.float32)
+    g = make_reconstructor("gaussian", sigma=1.5).reconstruct(maps, counts, counts > 0)
+    np.testing.assert_allclose(g.sum(axis=(1, 2)), maps.sum(axis=(1, 2)), rtol=1e-5)
+    assert g[0, 31, 0] > 0  # wrapped across the seam
+    noisy = rng.random((2, 32, 64)).astype(np.float32)
+    mask = rng.random((2, 32, 64)) < 0.3
+    pp = make_reconstructor("pullpush", levels=4).reconstruct(np.where(mask, noisy, 0), mask.astype(np.float32), mask)
+    np.testing.assert_allclose(pp[mask], noisy[mask], rtol=1e-6)  # data kept
+    assert (pp[~mask] > 0).all()  # holes filled
+    with pytest.raises(SettingsError, match="valid: gaussian, none, pullpush"):
+        make_reconstructor("median")
+
+
+def test_grid_lookup_matches_the_boxes_after_splits():
+    rng = np.random.default_rng(3)
+    g = HierarchicalGrid(np.zeros(3), np.array([4.0, 2.0, 3.0]), 6, 4, 8)
+    pts = rng.random((20_000, 3)) * [4.0, 2.0, 3.0]
+    g.visit(g.locate(pts), 0)
+    n_med = g.split_median(pts, threshold=300, max_levels=3)
+    g.node_count[:] = 1e9  # everything over the threshold: mid-plane splits, 3 levels at most
+    depth0 = g.depth[: g.n_nodes].copy()
+    n_mid = g.split_mid(threshold=10, max_levels=3)
+    assert n_med > 0 and n_mid > 0
+    assert g.depth[: g.n_nodes].max() <= depth0.max() + 3
+    leaf = g.locate(pts)
+    assert (g.child[leaf] < 0).all()
+    lo, hi = g.box_lo[leaf], g.box_hi[leaf]
+    assert ((pts >= lo - 1e-12) & (pts <= hi + 1e-12)).all()
+    # every leaf that had data kept a slot (split children inherit); slots are distinct
+    slots = g.data_slot[g.leaves()]
+    used = slots[slots >= 0]
+    assert used.size == np.unique(used).size and used.size > 0
+    assert g.locate(np.array([[-1.0, 0.5, 0.5], [2.0, 9.0, 1.0]])).tolist() == [-1, -1]
+
+
+def test_grid_recycles_unvisited_voxels():
+    g = HierarchicalGrid(np.zeros(3), np.ones(3), 4, 4, 8)
+    pts = np.random.default_rng(4).random((1000, 3))
+    g.visit(g.locate(pts[:500]), 0)
+    n0 = g.slots_in_use().size
+    g.visit(g.locate(pts[:10]), 1)
+    g.visit(g.locate(pts[:10]), 2)
+    freed = g.recycle(2, after=2)
+    assert freed > 0 and g.slots_in_use().size == n0 - freed
+    g.visit(g.locate(pts[500:]), 3)  # freed slots are reused
+    assert g.n_slots <= n0 + g.slots_in_use().size
