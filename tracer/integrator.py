@@ -35,7 +35,7 @@ from .film import N_AOV
 from .lights import ENV_NONE, env_pdf, env_radiance, sample_light, triangle_emission, triangle_light_pdf
 from .guiding.spatial import find_voxel, voxel_pdf, voxel_sample
 from .rng import DIM_PIXEL, DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, path_key, uniform
-from .sampling import dot, frame, power_heuristic, to_local, to_world
+from .sampling import dot, frame, power_heuristic, to_local, to_world, triangle_point
 
 MAX_BOUNCES = 4096
 
@@ -132,12 +132,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             continue
 
         # Hit point (from barycentrics: on the triangle's plane) and geometric normal
-        u1 = b1[k]
-        u2 = b2[k]
-        u0 = 1.0 - u1 - u2
-        x = (u0 * tri[p, 0, 0] + u1 * tri[p, 1, 0] + u2 * tri[p, 2, 0],
-             u0 * tri[p, 0, 1] + u1 * tri[p, 1, 1] + u2 * tri[p, 2, 1],
-             u0 * tri[p, 0, 2] + u1 * tri[p, 1, 2] + u2 * tri[p, 2, 2])
+        x = triangle_point(tri, p, b1[k], b2[k])
         ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])  # unit, counter-clockwise side
         m = tri_material[p]
         cos_o = -dot(wray, ng)  # > 0 when the path arrived on the counter-clockwise side

@@ -120,6 +120,15 @@ def sample_uniform_triangle(u0, u1):
     return b1, b2
 
 
+@jit(inline="always")
+def triangle_point(tri, p, b1, b2):
+    """The point of triangle p (tri (F, 3, 3)) at barycentrics (b1, b2): on the triangle's plane."""
+    b0 = 1.0 - b1 - b2
+    return (b0 * tri[p, 0, 0] + b1 * tri[p, 1, 0] + b2 * tri[p, 2, 0],
+            b0 * tri[p, 0, 1] + b1 * tri[p, 1, 1] + b2 * tri[p, 2, 1],
+            b0 * tri[p, 0, 2] + b1 * tri[p, 1, 2] + b2 * tri[p, 2, 2])
+
+
 # --- Multiple importance sampling ----------------------------------------------------------
 @jit
 def power_heuristic(pdf_a, pdf_b):

@@ -27,20 +27,24 @@ def test_alias_table_realises_the_map():
     maps[1, :, :5] = 0.0
     maps[2] = 0.0
     maps[3, 2, 3] = 1e6  # one dominant bin
-    q, alias, prob, usable = build_tables(maps)
+    table, usable = build_tables(maps)
+    prob = table[:, :, 2].astype(np.float64)
     assert list(usable) == [True, True, False, True, True]
+    # P(alias) of every entry is the P of the bin it points to
+    alias = table[:, :, 1].astype(np.int64)
+    np.testing.assert_array_equal(table[:, :, 3], np.take_along_axis(table[:, :, 2], alias, axis=1))
     target = maps.reshape(5, -1) / np.maximum(maps.reshape(5, -1).sum(axis=1, keepdims=True), 1e-300)
     np.testing.assert_allclose(prob[usable], target[usable], rtol=1e-6, atol=1e-12)
     assert (prob[1].reshape(H, W)[:, :5] == 0).all() and (prob[2] == 0).all()
     # sampling frequencies per bin match prob (chi-square), and the pdf matches the bin
     u = rng.random((400_000, 2))
     for slot in (0, 1, 3):
-        d, p = map_sample_batch(q, alias, prob, slot, H, W, u)
+        d, p = map_sample_batch(table, slot, H, W, u)
         b = bin_of_batch(d, H, W)
         passed, msg = histogram_test(np.bincount(b, minlength=H * W), prob[slot] * u.shape[0], ntests=3)
         assert passed, msg
         np.testing.assert_allclose(p, prob[slot, b] * H * W / (4 * np.pi), rtol=1e-12)
-        np.testing.assert_allclose(map_pdf_batch(prob, slot, H, W, d), p, rtol=1e-12)
+        np.testing.assert_allclose(map_pdf_batch(table, slot, H, W, d), p, rtol=1e-12)
 
 
 def test_gaussian_keeps_mass_and_pullpush_fills_holes():

@@ -5,13 +5,15 @@ phi = atan2(y, x), both uniform, so every bin covers the same solid angle 4 pi /
 (the cylindrical projection preserves area). Bin k = row * n_phi + col.
 
 A map is sampled through an alias table (Walker, built by Vose's method) over its K bins: u0
-picks a table entry and, with the entry's threshold q (float32), the entry's bin or its alias; u1
-and what is left of u0 place the direction uniformly in solid angle inside the bin. Sampling is
-O(1) and touches two or three cache lines of the map: with thousands of voxels, the maps do not
-fit in cache, and a binary search over a CDF cost one cache miss per step. Beside the table,
-`prob` (float64) holds each bin's probability as the table actually realises it, computed from
-the stored float32 thresholds: the density `map_pdf` returns, prob[k] K / (4 pi), is the one
-`map_sample` samples from, to rounding in the last bit of a double.
+picks a table entry and, with the entry's threshold q, the entry's bin or its alias; u1 and what
+is left of u0 place the direction uniformly in solid angle inside the bin. Sampling is O(1). Each
+entry is one 16-byte record (q, alias, P(bin), P(alias)) in float32, so that a sample, and a
+density lookup, read a single cache line: with thousands of voxels the maps live in L3 at best,
+and every line a vertex touches costs. P holds each bin's probability as the table realises it,
+computed in float64 from the stored float32 thresholds and then rounded toward zero to float32:
+the density `map_pdf` returns, P K / (4 pi), is the one `map_sample` returns for the same bin,
+exactly, integrates to at most 1, and falls short of the frequency the table draws that bin with
+by float32 rounding (at most 6e-8 relative).
 """
 import math
 
@@ -50,21 +52,22 @@ def bin_direction(k, n_theta, n_phi, s, t):
 
 
 @jit(inline="always")
-def map_sample(q, alias, prob, slot, n_theta, n_phi, u0, u1):
+def map_sample(table, slot, n_theta, n_phi, u0, u1):
     """Sample a direction from map `slot`: u0 picks the bin (and is reused inside it), u1 the
     position along phi. Returns (direction, pdf per unit solid angle); pdf 0 on failure."""
     K = n_theta * n_phi
     x = u0 * K
     k = min(int(x), K - 1)
     f = min(max(x - k, 0.0), 1.0)
-    qk = float(q[slot, k])
+    qk = float(table[slot, k, 0])
     if f < qk:
         b = k
         s = f / qk
+        p = float(table[slot, k, 2])
     else:
-        b = alias[slot, k]
+        b = int(table[slot, k, 1])
         s = (f - qk) / (1.0 - qk) if qk < 1.0 else 0.5
-    p = prob[slot, b]
+        p = float(table[slot, k, 3])
     if not (p > 0.0):
         return (0.0, 0.0, 1.0), 0.0
     d = bin_direction(b, n_theta, n_phi, s, u1)
@@ -72,9 +75,9 @@ def map_sample(q, alias, prob, slot, n_theta, n_phi, u0, u1):
 
 
 @jit(inline="always")
-def map_pdf(prob, slot, n_theta, n_phi, d):
+def map_pdf(table, slot, n_theta, n_phi, d):
     """Density per unit solid angle with which `map_sample` produces direction d."""
-    return prob[slot, direction_bin(d, n_theta, n_phi)] * (n_theta * n_phi) / FOUR_PI
+    return float(table[slot, direction_bin(d, n_theta, n_phi), 2]) * (n_theta * n_phi) / FOUR_PI
 
 
 @kernel
@@ -126,47 +129,65 @@ def _build_alias(m, q, alias, prob, usable):
         # what is left (rounding) keeps its own bin: q = 1
         # the probabilities the stored float32 thresholds realise
         for k in range(K):
-            qk = float(q[s, k])
+            qk = float(np.float32(q[s, k]))
             prob[s, k] += qk / K
             prob[s, alias[s, k]] += (1.0 - qk) / K
 
 
+@kernel
+def _pack(q, alias, prob, table):
+    for s in prange(q.shape[0]):
+        for k in range(q.shape[1]):
+            table[s, k, 0] = q[s, k]
+            table[s, k, 1] = alias[s, k]
+            table[s, k, 2] = prob[s, k]
+            table[s, k, 3] = prob[s, alias[s, k]]
+
+
 def build_tables(maps):
-    """Sampling tables of non-negative maps (S, n_theta, n_phi): thresholds q (S, K) float32,
-    alias (S, K) int16, prob (S, K) float64, and usable (S,) bool, False where a map is zero
-    everywhere (or not finite): no sampling there."""
+    """Sampling tables of non-negative maps (S, n_theta, n_phi): (S, K, 4) float32 records
+    (q, alias, P(bin), P(alias)) and usable (S,) bool, False where a map is zero everywhere (or
+    not finite): no sampling there (all of its records are 0)."""
     s = maps.shape[0]
     m = np.ascontiguousarray(maps).reshape(s, -1)
     K = m.shape[1]
-    q = np.zeros((s, K), np.float32)
-    alias = np.zeros((s, K), np.int16 if K <= 32767 else np.int32)
+    if K >= 1 << 24:
+        raise ValueError("maps of 2^24 bins or more cannot index their aliases in float32")
+    q = np.zeros((s, K))
+    alias = np.zeros((s, K), np.int64)
     prob = np.zeros((s, K))
     usable = np.zeros(s, np.bool_)
+    table = np.zeros((s, K, 4), np.float32)
     if s:
         _build_alias(m, q, alias, prob, usable)
-    return q, alias, prob, usable
+        # P rounded toward zero: a density that integrates to at most 1 (short by float32 rounding)
+        p32 = prob.astype(np.float32)
+        over = p32.astype(np.float64) > prob
+        p32[over] = np.nextafter(p32[over], np.float32(0.0))
+        _pack(q, alias, p32, table)
+    return table, usable
 
 
 @kernel
-def map_sample_batch(q, alias, prob, slot, n_theta, n_phi, u):
+def map_sample_batch(table, slot, n_theta, n_phi, u):
     """Batch map_sample for tests: u (n, 2) -> directions (n, 3), pdf (n,)."""
     n = u.shape[0]
     d = np.empty((n, 3))
     p = np.empty(n)
     for i in prange(n):
-        w, pdf = map_sample(q, alias, prob, slot, n_theta, n_phi, u[i, 0], u[i, 1])
+        w, pdf = map_sample(table, slot, n_theta, n_phi, u[i, 0], u[i, 1])
         d[i, 0], d[i, 1], d[i, 2] = w
         p[i] = pdf
     return d, p
 
 
 @kernel
-def map_pdf_batch(prob, slot, n_theta, n_phi, d):
+def map_pdf_batch(table, slot, n_theta, n_phi, d):
     """Batch map_pdf for tests: d (n, 3) -> (n,)."""
     n = d.shape[0]
     p = np.empty(n)
     for i in prange(n):
-        p[i] = map_pdf(prob, slot, n_theta, n_phi, (d[i, 0], d[i, 1], d[i, 2]))
+        p[i] = map_pdf(table, slot, n_theta, n_phi, (d[i, 0], d[i, 1], d[i, 2]))
     return p
 
 

@@ -30,6 +30,7 @@ from ..sampling import (
     sample_uniform_triangle,
     to_local,
     to_world,
+    triangle_point,
 )
 from .directional import direction_bin
 from .spatial import find_voxel
@@ -102,12 +103,7 @@ def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type,
         p = prim[k]
         if p < 0:
             continue
-        u1 = b1[k]
-        u2 = b2[k]
-        u0 = 1.0 - u1 - u2
-        x = (u0 * tri[p, 0, 0] + u1 * tri[p, 1, 0] + u2 * tri[p, 2, 0],
-             u0 * tri[p, 0, 1] + u1 * tri[p, 1, 1] + u2 * tri[p, 2, 1],
-             u0 * tri[p, 0, 2] + u1 * tri[p, 1, 2] + u2 * tri[p, 2, 2])
+        x = triangle_point(tri, p, b1[k], b2[k])
         ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])
         m = tri_material[p]
         win = (-d[k, 0], -d[k, 1], -d[k, 2])  # toward where the photon came from
