@@ -80,15 +80,12 @@ def _row_sums(a, rows):
 
 
 @kernel
-def _normalised(a, rows):
-    """a[rows] (float32) with every row divided by its sum (rows with a positive sum only)."""
+def _normalised(a, rows, totals):
+    """a[rows] (float32) with every row divided by its total (positive, from _row_sums)."""
     out = np.empty((rows.shape[0], a.shape[1]), np.float32)
     for i in prange(rows.shape[0]):
-        t = 0.0
         for k in range(a.shape[1]):
-            t += a[rows[i], k]
-        for k in range(a.shape[1]):
-            out[i, k] = a[rows[i], k] / t
+            out[i, k] = a[rows[i], k] / totals[i]
     return out
 
 
@@ -238,10 +235,11 @@ class HistogramGuide:
         if slots.size == 0:
             return
         total = _row_sums(g.power, slots)
-        slots = slots[total > 0.0]
+        has = total > 0.0
+        slots, total = slots[has], total[has]
         if slots.size == 0:
             return
-        maps = _normalised(g.power, slots).reshape(-1, self.map_height, self.map_width)
+        maps = _normalised(g.power, slots, total).reshape(-1, self.map_height, self.map_width)
         counts = g.count[slots].reshape(maps.shape)
         rec = self.reconstructor.reconstruct(maps, counts, counts > 0)
         table, usable = build_tables(rec)
