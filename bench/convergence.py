@@ -7,7 +7,8 @@ A scene name is `scenes/<name>/<name>.obj`, or `<scene-dir>/<name>/scene.obj` fo
 scenes; its reference is the one `python -m bench.reference` wrote (scenes/<name>/reference.exr,
 or bench/results/references/<name>/ for external scenes). Every method runs at every time
 budget and every spp budget (`--spp`, default: the spp that `bsdf` reached at each time
-budget), once per seed. Writes to `--out` (default bench/results/convergence/):
+budget; bsdf is then not run again at them: its time runs are its points against spp), once
+per seed. Writes to `--out` (default bench/results/convergence/):
 
     records.jsonl                 one JSON record per run: scene, method, settings, seed, spp,
                                   wall time split into learning / inference / rendering, guide
@@ -73,17 +74,23 @@ def run_one(scene, method, seed, ref, time_budget=None, spp=None):
 
 
 def _band(records, method, x_key):
-    """x values and (median, min, max) of relMSE over seeds, per x (grouped by budget)."""
+    """x values and (median, min, max) of relMSE over seeds, per x (grouped by budget).
+
+    Against spp, a method run at spp budgets is plotted at those; one run only at time budgets
+    (bsdf, whose time runs define the default spp budgets) at the median spp of each time budget."""
     groups = {}
-    for r in records:
-        if r["method"] != method:
+    mine = [r for r in records if r["method"] == method]
+    by_spp = x_key == "spp" and any(r["budget"] == "spp" for r in mine)
+    for r in mine:
+        if r["budget"] != ("spp" if by_spp else "time"):
             continue
-        key = r["time_budget"] if x_key == "time" else r["spp"]
+        key = r["spp"] if by_spp else r["time_budget"]
         groups.setdefault(key, []).append(r)
     xs, med, lo, hi = [], [], [], []
     for key in sorted(groups):
         rs = groups[key]
-        x = np.median([r["time_total"] for r in rs]) if x_key == "time" else key
+        x = (key if by_spp else
+             np.median([r["time_total"] if x_key == "time" else r["spp"] for r in rs]))
         e = [r["metrics"]["relMSE"] for r in rs]
         xs.append(x), med.append(np.median(e)), lo.append(min(e)), hi.append(max(e))
     return np.array(xs), np.array(med), np.array(lo), np.array(hi)
@@ -97,7 +104,7 @@ def chart(records, scene, methods, x_key, path):
 
     fig, ax = plt.subplots(figsize=(5, 3.6), dpi=110)
     for m in methods:
-        x, med, lo, hi = _band([r for r in records if r["budget"] == x_key], m, x_key)
+        x, med, lo, hi = _band(records, m, x_key)
         if len(x) == 0:
             continue
         ax.plot(x, med, marker="o", label=m)
@@ -199,7 +206,8 @@ def main(argv=None):
             spps = ([int(s) for s in a.spp.split(",")] if a.spp else  # bsdf's median spp per time budget
                     sorted({int(np.median([r["spp"] for r in recs if r["method"] == "bsdf" and r["time_budget"] == t]))
                             for t in times}))
-            for m in methods:
+            # bsdf's own spp points are its time runs (the default spp budgets are its median spp)
+            for m in (methods if a.spp else [m for m in methods if m != "bsdf"]):
                 for seed in range(a.seeds):
                     for n in spps:
                         recs.append(run_one(scene, m, seed, ref, spp=n))

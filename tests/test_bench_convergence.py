@@ -31,3 +31,20 @@ def test_reference_floor_check():
     recs = [{"metrics": {"relMSE": e}} for e in (0.5, 0.02, 0.3)]
     assert convergence.floor_check(recs, 0.001) == (True, 0.02)
     assert convergence.floor_check(recs, 0.005)[0] is False
+
+
+def test_default_spp_budgets_do_not_rerun_bsdf(tmp_path, monkeypatch):
+    """Without --spp the spp budgets are bsdf's own spp at each time budget: bsdf is not rendered
+    again at them, its time runs are its points on the spp chart."""
+    obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=8, height=8)
+    ref_dir = tmp_path / "ref"
+    monkeypatch.setattr(convergence, "default_out", lambda path: str(ref_dir))
+    assert reference.main([obj, "--spp", "16", "--out", str(ref_dir)]) == 0
+    out = tmp_path / "conv"
+    assert convergence.main(["--scenes", obj, "--time", "0.05", "--seeds", "2", "--out", str(out)]) == 0
+    recs = [json.loads(line) for line in open(out / "records.jsonl")]
+    assert [r["budget"] for r in recs] == ["time", "time"]
+    x, med, lo, hi = convergence._band(recs, "bsdf", "spp")
+    assert x.tolist() == [float(sorted(r["spp"] for r in recs)[0] + sorted(r["spp"] for r in recs)[1]) / 2]
+    assert lo[0] <= med[0] <= hi[0]
+    assert os.path.isfile(out / "box_spp.png")

@@ -19,7 +19,8 @@ that the record is an unbiased estimate of the incident radiance along that dire
 
 Depths follow Mitsuba 3: `max_depth` 1 shows emitters seen directly, 2 adds direct light,
 -1 is unlimited (bounded at MAX_BOUNCES for safety); Russian roulette applies from the
-bounce numbered `rr_depth` on, continuing with probability min(max(beta), 0.95).
+bounce numbered `rr_depth` on, continuing with probability min(max(beta), 0.95), where beta is
+the throughput BSDF sampling would have given (the same thing without a guide; see shade).
 """
 import math
 import time
@@ -88,7 +89,7 @@ def _offset(x, ng, w, eps):
 
 @kernel
 def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type, mat_param, lt,
-          beta, L, depth, prev_pdf, prev_delta, key, aov, max_depth, rr_depth, eps,
+          beta, L, depth, prev_pdf, prev_delta, gain, key, aov, max_depth, rr_depth, eps,
           alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow, gs,
           r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_L0, r_beta, rec_base, record, prev_rec):
     """One bounce for every active path: emission, NEE sample, BSDF sample, roulette.
@@ -202,13 +203,17 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         u0 = uniform(kk, bounce_dim(dk, DIR))
         u1 = uniform(kk, bounce_dim(dk, DIR + 1))
         strategy = 0
+        gn = gain[i]  # product of p_bsdf / p_mixture along the path (1 without a guide)
         if a < 1.0 and uniform(kk, bounce_dim(dk, STRATEGY)) >= a:
             strategy = 1
             wiw, pg = voxel_sample(gs, node, u0, u1)
             wi = to_local(wiw, s, tt, ng)
             f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wi, True)
-            pdf = a * bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wi) + (1.0 - a) * pg
+            pbs = bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wi)
+            pdf = a * pbs + (1.0 - a) * pg
             wt = (f[0] / pdf, f[1] / pdf, f[2] / pdf) if pdf > 0.0 else (0.0, 0.0, 0.0)
+            if pdf > 0.0:
+                gn *= pbs / pdf
             dlt = False
         else:
             wi, wt, pdf, dlt = bsdfs.bsdf_sample(mat_type, mat_param, m, wo, u0, u1,
@@ -217,14 +222,17 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             if a < 1.0 and pdf > 0.0 and not dlt:
                 pm = a * pdf + (1.0 - a) * voxel_pdf(gs, node, wiw)
                 wt = (wt[0] * pdf / pm, wt[1] * pdf / pm, wt[2] * pdf / pm)
+                gn *= pdf / pm
                 pdf = pm
         nb = (b[0] * wt[0], b[1] * wt[1], b[2] * wt[2])
         bmax = max(nb[0], max(nb[1], nb[2]))
         ok = bmax > 0.0 and math.isfinite(bmax)
 
-        # Russian roulette
+        # Russian roulette, on the throughput BSDF sampling would have had (beta / gain): on beta
+        # itself it would undo the guide, since a guided direction's small weight f cos / p would
+        # be raised back to ~1 by a matching chance of death (a path's survival density ~ f cos)
         if ok and dk + 1 >= rr_depth:
-            q = min(bmax, 0.95)
+            q = min(bmax / gn, 0.95)
             if uniform(kk, bounce_dim(dk, RR)) >= q:
                 ok = False
             else:
@@ -260,6 +268,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         depth[i] = dk + 1
         prev_pdf[i] = pdf
         prev_delta[i] = dlt
+        gain[i] = gn
         alive[k] = True
 
 
@@ -403,6 +412,7 @@ class WaveBuffers:
         self.depth = np.zeros(size, np.int32)
         self.prev_pdf = np.zeros(size)
         self.prev_delta = np.zeros(size, np.bool_)
+        self.gain = np.ones(size)
         self.prev_rec = np.zeros(size, np.int64)
         self.aov = np.zeros((size, N_AOV))
         self.active = np.zeros(size, np.int64)
@@ -446,6 +456,7 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True)
     init_paths(ctx.cam, scene.width, scene.height, ctx.crop, ctx.jitter, ctx.seed, sample0, g0, buf.pix[:n], buf.key[:n],
                buf.ray_o[:n], buf.ray_d[:n], buf.beta[:n], buf.L[:n], buf.depth[:n],
                buf.prev_pdf[:n], buf.prev_delta[:n], buf.aov[:n], buf.prev_rec[:n])
+    buf.gain[:n] = 1.0
     active, active2 = buf.active, buf.active2
     active[:n] = np.arange(n)
     n_active = n
@@ -465,7 +476,7 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True)
             rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
         shade(active[:n_active], ro, rd, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
               scene.materials.type, scene.materials.param, lights, buf.beta, buf.L, buf.depth,
-              buf.prev_pdf, buf.prev_delta, buf.key, buf.aov, ctx.max_depth, ctx.rr_depth, ctx.eps,
+              buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.aov, ctx.max_depth, ctx.rr_depth, ctx.eps,
               buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow,
               gs, *rec[:10], n_rec, record, buf.prev_rec)
         t0 = stats.tick("shade", t0)
