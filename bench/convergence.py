@@ -2,6 +2,10 @@
 
     python -m bench.convergence --scenes ajar,cornell --methods bsdf --time 10,20,40,80 --seeds 3
     python -m bench.convergence --scenes veach-ajar --scene-dir ../shared/scenes --time 10,20
+    python -m bench.convergence --scenes ajar --methods bsdf,photon,photon:mixing=variance
+
+A method is a registered guide name, optionally with settings after a colon
+(`name:key=value,key=value`, as `--guide-opt` takes them), so variants of one guide can be compared.
 
 A scene name is `scenes/<name>/<name>.obj`, or `<scene-dir>/<name>/scene.obj` for external
 scenes; its reference is the one `python -m bench.reference` wrote (scenes/<name>/reference.exr,
@@ -27,6 +31,8 @@ import numpy as np
 
 import tracer
 from tracer import metrics
+from tracer.cli import _guide_opts
+from tracer.guiding import make_guide
 
 from .reference import ROOT, default_out, load
 
@@ -56,8 +62,15 @@ def reference_for(path):
     return load(out)
 
 
+def method_spec(method):
+    """'photon' or 'photon:mixing=variance,sigma=2' -> (guide name, settings)."""
+    name, _, opts = method.partition(":")
+    return name, _guide_opts([o for o in opts.split(",") if o])
+
+
 def run_one(scene, method, seed, ref, time_budget=None, spp=None):
-    r = tracer.render(scene, spp=spp, time=time_budget, guide=method, seed=seed)
+    name, settings = method_spec(method)
+    r = tracer.render(scene, spp=spp, time=time_budget, guide=name, guide_settings=settings or None, seed=seed)
     s = r.stats
     learning = s.get("guide_time_learning", 0.0)
     inference = s.get("guide_time_inference", 0.0)
@@ -172,14 +185,18 @@ def summary_table(all_records, scenes, methods, times, floors):
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench.convergence", description=__doc__.splitlines()[0])
     p.add_argument("--scenes", required=True, help="comma-separated scene names or paths")
-    p.add_argument("--methods", default="bsdf", help="comma-separated registered guide names")
+    p.add_argument("--methods", default="bsdf", help="comma-separated registered guide names, each with "
+                   "optional settings: name:key=value,... (separate methods with ';' when settings are given)")
     p.add_argument("--time", default="10,20,40,80", help="comma-separated wall-time budgets in seconds")
     p.add_argument("--spp", default=None, help="comma-separated spp budgets (default: what bsdf reached)")
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--scene-dir", default=None, help="folder of external scenes (<dir>/<name>/scene.obj)")
     p.add_argument("--out", default=DEFAULT_OUT)
     a = p.parse_args(argv)
-    methods = [m.strip() for m in a.methods.split(",") if m.strip()]
+    methods = [m.strip() for m in a.methods.split(";" if ";" in a.methods else ",") if m.strip()]
+    for m in methods:  # an unknown guide or setting fails now, not after an hour of runs
+        name, settings = method_spec(m)
+        make_guide(name, **settings)
     if "bsdf" not in methods:
         methods.insert(0, "bsdf")  # every ratio is against bsdf
     times = [float(t) for t in a.time.split(",")]

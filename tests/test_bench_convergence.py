@@ -48,3 +48,12 @@ def test_default_spp_budgets_do_not_rerun_bsdf(tmp_path, monkeypatch):
     assert x.tolist() == [float(sorted(r["spp"] for r in recs)[0] + sorted(r["spp"] for r in recs)[1]) / 2]
     assert lo[0] <= med[0] <= hi[0]
     assert os.path.isfile(out / "box_spp.png")
+
+
+def test_method_specs_carry_guide_settings():
+    assert convergence.method_spec("photon") == ("photon", {})
+    assert convergence.method_spec("photon:mixing=variance,sigma=2") == ("photon", {"mixing": "variance", "sigma": 2})
+    import pytest
+    from tracer.errors import SettingsError
+    with pytest.raises(SettingsError, match="no setting 'colour'"):
+        convergence.main(["--scenes", "cornell", "--methods", "bsdf,photon:colour=red", "--out", "/nonexistent"])

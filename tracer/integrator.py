@@ -91,7 +91,8 @@ def _offset(x, ng, w, eps):
 def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type, mat_param, lt,
           beta, L, depth, prev_pdf, prev_delta, gain, key, aov, max_depth, rr_depth, eps,
           alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow, gs,
-          r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_L0, r_beta, rec_base, record, prev_rec):
+          r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_L0, r_beta, r_pb, rec_base, record,
+          prev_rec):
     """One bounce for every active path: emission, NEE sample, BSDF sample, roulette.
 
     Entry k of the hit arrays (t, prim, b1, b2) and of ray_o/ray_d belongs to path
@@ -219,6 +220,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             wi, wt, pdf, dlt = bsdfs.bsdf_sample(mat_type, mat_param, m, wo, u0, u1,
                                                  uniform(kk, bounce_dim(dk, LOBE)), True)
             wiw = to_world(wi, s, tt, ng)
+            pbs = pdf
             if a < 1.0 and pdf > 0.0 and not dlt:
                 pm = a * pdf + (1.0 - a) * voxel_pdf(gs, node, wiw)
                 wt = (wt[0] * pdf / pm, wt[1] * pdf / pm, wt[2] * pdf / pm)
@@ -250,6 +252,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             r_node[r] = node
             r_path[r] = i
             r_pdf[r] = pdf
+            r_pb[r] = pbs
             r_fcos[r] = (0.2126 * wt[0] + 0.7152 * wt[1] + 0.0722 * wt[2]) * pdf
             for c in range(3):
                 r_x[r, c] = x[c]
@@ -352,6 +355,7 @@ class Records(NamedTuple):
     path: np.ndarray  # (R,) int64 path slot in the wave
     L0: np.ndarray  # (R, 3) float64 path radiance when the direction was sampled
     beta: np.ndarray  # (R, 3) float64 throughput after the vertex (0 if the path ended)
+    pb: np.ndarray  # (R,) float32 the BSDF's own density of wi (pdf is the mixture's)
     radiance: np.ndarray  # (R,) float32 luminance of the radiance that came back along wi
 
     @staticmethod
@@ -359,7 +363,8 @@ class Records(NamedTuple):
         f3 = lambda: np.zeros((size, 3), np.float32)  # noqa: E731
         return Records(f3(), f3(), f3(), np.zeros(size, np.float32), np.zeros(size, np.float32),
                        np.full(size, -1, np.int8), np.full(size, -1, np.int32), np.zeros(size, np.int64),
-                       np.zeros((size, 3)), np.zeros((size, 3)), np.zeros(size, np.float32))
+                       np.zeros((size, 3)), np.zeros((size, 3)), np.zeros(size, np.float32),
+                       np.zeros(size, np.float32))
 
     def grown(self, size, used):
         new = Records.allocate(size)
@@ -478,7 +483,7 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True)
               scene.materials.type, scene.materials.param, lights, buf.beta, buf.L, buf.depth,
               buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.aov, ctx.max_depth, ctx.rr_depth, ctx.eps,
               buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow,
-              gs, *rec[:10], n_rec, record, buf.prev_rec)
+              gs, *rec[:11], n_rec, record, buf.prev_rec)
         t0 = stats.tick("shade", t0)
         n_next, ns = compact(active[:n_active], buf.alive, buf.next_o, buf.next_d, buf.has_shadow, buf.sh_o,
                              buf.sh_d, buf.sh_tmax, buf.sh_L, active2, buf.ray_o, buf.ray_d, buf.sp_path,

@@ -54,7 +54,10 @@ COMMON = {
     "mis_min_samples": 32,  # Q_thr of eq. 14
     "max_levels": 3,  # new tree levels per iteration at most
     "direct": 0,  # 1: maps learn direct light too; 0: only what NEE does not sample (see below)
+    "mixing": "eq14",  # eq14: the paper's mean-contribution ratio; variance: least second moment
 }
+MIXING = ("eq14", "variance")
+N_ALPHA = 7  # candidate mixing weights of `mixing variance`, evenly spaced over [alpha_min, alpha_max]
 
 
 @jit
@@ -66,6 +69,31 @@ def _mis_stats(node, strategy, radiance, fcos, mis_sum, mis_n):
             continue
         mis_sum[nd, s] += radiance[i] * fcos[i]
         mis_n[nd, s] += 1.0
+
+
+@jit
+def _mix_moments(node, strategy, radiance, fcos, pdf, pb, alpha, cand, mom, mom_n):
+    """For `mixing variance`: per voxel and candidate weight c, the second moment of the one-sample
+    estimate F / p_c (F = radiance |f cos| of the vertex, p_c = c p_bsdf + (1 - c) p_guide),
+    estimated from the vertices sampled with the current mixture p by importance reweighting:
+    E_p[F^2 / (p_c p)] = integral of F^2 / p_c. F includes the whole rest of its path, so heavy
+    tails that the maps cause further down the path count too."""
+    for i in range(node.shape[0]):
+        nd = node[i]
+        if nd < 0 or strategy[i] < 0:
+            continue
+        a = alpha[nd]
+        p = pdf[i]
+        if a >= 1.0 or not p > 0.0:
+            continue
+        pg = max((p - a * pb[i]) / (1.0 - a), 0.0)
+        f = radiance[i] * fcos[i]
+        mom_n[nd] += 1.0
+        if not f > 0.0:
+            continue
+        for k in range(cand.shape[0]):
+            pc = cand[k] * pb[i] + (1.0 - cand[k]) * pg
+            mom[nd, k] += f * f / (pc * p) if pc > 0.0 else np.inf
 
 
 @kernel
@@ -124,6 +152,10 @@ class HistogramGuide:
         self.learn_direct = bool(_int("direct", s["direct"], 0))
         if s["direct"] not in (0, 1):
             raise SettingsError(f"guide setting direct must be 0 or 1, got {s['direct']!r}")
+        if s["mixing"] not in MIXING:
+            raise SettingsError(f"guide setting mixing: unknown {s['mixing']!r}; valid: " + ", ".join(MIXING))
+        self.mixing = s["mixing"]
+        self.alpha_candidates = np.linspace(self.alpha_min, self.alpha_max, N_ALPHA)
         if s["reconstruct"] not in RECONSTRUCTORS:
             raise SettingsError(f"guide setting reconstruct: unknown {s['reconstruct']!r}; valid: "
                                 + ", ".join(sorted(RECONSTRUCTORS)))
@@ -144,6 +176,7 @@ class HistogramGuide:
         self.time_inference = 0.0
         self.peak_memory = 0
         self.info = {"photons": 0, "deposits": 0, "photon_rays": 0, "vertices": 0}
+        self._mom = self._mom_n = None
 
     def state(self):
         return self._state
@@ -160,6 +193,12 @@ class HistogramGuide:
             nodes = rec.node[keep].astype(np.int64)
             g.visit(nodes, self.iteration)
             _mis_stats(rec.node, rec.strategy, rec.radiance, rec.fcos, g.mis_sum, g.mis_n)
+            if self.mixing == "variance":
+                if self._mom is None or self._mom.shape[0] < g.alpha.shape[0]:
+                    self._mom = np.zeros((g.alpha.shape[0], N_ALPHA))
+                    self._mom_n = np.zeros(g.alpha.shape[0])
+                _mix_moments(rec.node, rec.strategy, rec.radiance, rec.fcos, rec.pdf, rec.pb, g.alpha,
+                             self.alpha_candidates, self._mom, self._mom_n)
             self._observe_data(rec, keep)
         self.time_learning += time.perf_counter() - t0
 
@@ -170,6 +209,8 @@ class HistogramGuide:
             self._initialise()
         else:
             self.grid.recycle(self.iteration)
+            if self.mixing == "variance":
+                self._choose_alpha()  # before the splits, which copy a voxel's weight to its children
             self._iterate_data()
             self.grid.split_mid(self.c * math.sqrt(2.0 ** self.iteration), self.max_levels)
         t1 = time.perf_counter()
@@ -247,7 +288,19 @@ class HistogramGuide:
         g.prev[slots] = maps.reshape(slots.size, -1)
         g.map_ok[g.slot_node[slots]] = usable
 
+    def _choose_alpha(self):
+        """`mixing variance`: each voxel with mis_min_samples vertices this iteration takes the
+        candidate weight of least estimated second moment."""
+        if self._mom is None:
+            return
+        g = self.grid
+        ok = np.flatnonzero(self._mom_n >= self.q_thr)
+        g.alpha[ok] = self.alpha_candidates[np.argmin(self._mom[ok], axis=1)]
+        self._mom = self._mom_n = None
+
     def _update_alpha(self):
+        if self.mixing != "eq14":
+            return
         g = self.grid
         n = g.n_nodes
         q = g.mis_n[:n]
