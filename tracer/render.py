@@ -195,7 +195,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     final = Film(crop[2], crop[3])
     t_render = _time.perf_counter()
     try:
-        if g is not None:
+        if g is not None and getattr(g, "learns", True):
             # Pilot (1 spp, unguided), then training iterations of 2^t N_c spp while they fit
             films.append((Film(crop[2], crop[3]), "pilot"))
             run_pass(films[-1][0], 1, "pilot", True)

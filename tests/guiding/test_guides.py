@@ -13,7 +13,8 @@ import pytest
 import tracer
 from tests import scenes
 from tests.stats import assert_z, image_mean
-from tracer.guiding import guide_names, make_guide
+from tracer.errors import SettingsError
+from tracer.guiding import FrozenGuide, guide_names, make_guide
 from tracer.integrator import Stats, WaveBuffers, trace_wave
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -132,3 +133,19 @@ def test_records_carry_the_incident_radiance(tmp_path):
         assert (rec.strategy[:n] <= 0).all()  # no guide: BSDF only
         assert_z(first.mean(), first.var(ddof=1) / first.size, expected, n_tests=2,
                  what=f"recorded radiance (direct={direct})")
+
+
+def test_frozen_guide_renders_final_passes_only_and_stays_unbiased(bsdf_renders):
+    name, w, h, spp = CASES[0]
+    g = make_guide("photon")
+    tracer.render(_scene(name, w, h), spp=32, guide=g, seed=303)
+    frozen = FrozenGuide(g)
+    r = tracer.render(_scene(name, w, h), spp=spp, guide=frozen, seed=202)
+    assert {p["kind"] for p in r.stats["passes"]} == {"final"} and r.stats["spp"] == spp
+    assert r.stats["guide_stats"]["frozen"] and r.stats["guide_time_learning"] == 0.0
+    assert frozen.state() is g.state()  # the maps it samples are the trained ones
+    m_g, v_g = image_mean(r)
+    m_b, v_b = image_mean(bsdf_renders[name])
+    assert_z(m_g, v_g + v_b, m_b, n_tests=3, what="frozen photon on cornell vs bsdf")
+    with pytest.raises(SettingsError, match="has learned"):
+        FrozenGuide(make_guide("photon"))

@@ -62,3 +62,46 @@ def warm_up_guides(ctx):
     Gaussian(1.0).reconstruct(np.zeros((1, 4, 4), np.float32), None, None)
     _mis_stats(np.zeros(1, np.int32), np.zeros(1, np.int8), np.zeros(1, np.float32), np.zeros(1, np.float32),
                np.zeros((1, 2)), np.zeros((1, 2)))
+    from .histogram import _mix_moments
+
+    f32 = np.zeros(1, np.float32)
+    _mix_moments(np.zeros(1, np.int32), np.zeros(1, np.int8), f32, f32, f32, f32, np.ones(1), np.ones(1),
+                 np.zeros((1, 1)), np.zeros(1))
+
+
+class FrozenGuide:
+    """What a trained guide learned, fixed: a render samples from its maps and learns nothing (no
+    pilot, no training passes). For equal-spp comparisons of the maps themselves, e.g.
+    `g = make_guide("photon"); tracer.render(scene, spp=64, guide=g)` to train, then
+    `tracer.render(scene, spp=256, guide=FrozenGuide(g))`. The scene must be the one it learned."""
+
+    learns = False
+    iterations = 0
+    spp_init = 1
+
+    def __init__(self, guide):
+        if guide is None or getattr(guide, "grid", None) is None:
+            raise SettingsError("FrozenGuide needs a guide that has learned (render with it first)")
+        self.guide = guide
+        self.name = guide.name + " (frozen)"
+        self._state = guide.state()
+        self.peak_memory = guide.memory_bytes()
+        self.time_learning = self.time_inference = 0.0
+
+    def prepare(self, scene, ctx):
+        pass
+
+    def state(self):
+        return self._state
+
+    def observe(self, records):
+        pass
+
+    def update(self):
+        pass
+
+    def memory_bytes(self):
+        return self.peak_memory
+
+    def stats(self):
+        return dict(self.guide.stats(), frozen=True)

@@ -1,0 +1,86 @@
+"""Relative variance per sample of what each method learned, at equal spp, without timing noise.
+
+    python -m bench.variance --scenes ajar,cornell --methods bsdf,photon,photon:mixing=variance
+    python -m bench.variance --scenes veach-ajar --scene-dir ../shared/scenes --scale 2 --seeds 5
+
+Per scene, each guide is trained once (`--train-spp`, seed 99), then frozen
+(tracer.guiding.FrozenGuide) and rendered `--seeds` times at `--spp`; `bsdf` is rendered the same
+way. The figure is the relative variance of one sample, averaged over pixels:
+mean(var_of_mean x spp / (R^2 + 0.01)), R the scene's reference (box-downsampled by `--scale`),
+i.e. the relMSE one sample would have; the lower, the better the learned sampling. It isolates
+the maps from learning cost and scheduling, which bench.convergence measures. Heavy-tailed
+estimators show up as a large spread over seeds, so every seed's figure is printed.
+"""
+import argparse
+
+import numpy as np
+
+import tracer
+from tracer.guiding import FrozenGuide, make_guide
+
+from .convergence import method_spec, reference_for, scene_path
+
+
+def relative_variance(film, ref, spp):
+    """Mean over pixels of the one-sample variance over (R^2 + 0.01), from a film of `spp` spp."""
+    v = film.variance().mean(axis=-1) * spp
+    return float((v / (ref.mean(axis=-1) ** 2 + 0.01)).mean())
+
+
+def downsample(img, s):
+    h, w = img.shape[0] // s, img.shape[1] // s
+    return img[: h * s, : w * s].reshape(h, s, w, s, -1).mean(axis=(1, 3))
+
+
+def measure(scene, ref, method, spp, seeds, train_spp):
+    """Per-seed relative variances of `method` on `scene` (frozen after training if a guide)."""
+    name, settings = method_spec(method)
+    guide = "bsdf"
+    if name != "bsdf":
+        g = make_guide(name, **settings)
+        tracer.render(scene, spp=train_spp, guide=g, seed=99)
+        guide = FrozenGuide(g)
+    out = []
+    for s in range(seeds):
+        r = tracer.render(scene, spp=spp, guide=guide, seed=1000 + s)
+        out.append(relative_variance(r.film, ref, spp))
+    return out
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="python -m bench.variance", description=__doc__.splitlines()[0])
+    p.add_argument("--scenes", required=True)
+    p.add_argument("--methods", default="bsdf,photon,grid")
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--train-spp", type=int, default=64, help="spp of the render that trains each guide")
+    p.add_argument("--seeds", type=int, default=5)
+    p.add_argument("--scale", type=int, default=2, help="render at 1/scale of the scene's resolution")
+    p.add_argument("--scene-dir", default=None)
+    a = p.parse_args(argv)
+    methods = [m.strip() for m in a.methods.split(";" if ";" in a.methods else ",") if m.strip()]
+    if "bsdf" not in methods:
+        methods.insert(0, "bsdf")
+    methods.sort(key=lambda m: m != "bsdf")  # bsdf first: the ratios are against it
+    for m in methods:
+        name, settings = method_spec(m)
+        make_guide(name, **settings)
+    print(f"relative variance of one sample (mean over pixels of var / (R^2 + 0.01)); {a.spp} spp x "
+          f"{a.seeds} seeds, guides trained at {a.train_spp} spp then frozen, 1/{a.scale} resolution")
+    print(f"{'scene':22s} {'method':28s} {'median':>9s} {'vs bsdf':>8s}  per seed")
+    for given in [s.strip() for s in a.scenes.split(",") if s.strip()]:
+        path = scene_path(given, a.scene_dir)
+        ref = downsample(reference_for(path)[0], a.scale)
+        scene = tracer.load_scene(path)
+        scene = tracer.load_scene(path, width=scene.width // a.scale, height=scene.height // a.scale)
+        base = None
+        for m in methods:
+            vals = measure(scene, ref, m, a.spp, a.seeds, a.train_spp)
+            med = float(np.median(vals))
+            base = med if m == "bsdf" else base
+            ratio = f"{med / base:8.2f}" if base else " " * 8
+            print(f"{given:22s} {m:28s} {med:9.4g} {ratio}  " + " ".join(f"{v:.3g}" for v in vals), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
