@@ -19,9 +19,9 @@ from tracer.integrator import Stats, WaveBuffers, trace_wave
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 GUIDES = [g for g in guide_names() if g != "bsdf"]
-# every guide at its defaults, and the variance-minimising mixing weights (which change how often
-# each strategy is drawn, so they must leave the mean alone too)
-VARIANTS = [(g, {}) for g in GUIDES] + [("photon", {"mixing": "variance"})]
+# every guide at its defaults (mixing weights of least second moment), and the paper's eq. 14
+# weights (which change how often each strategy is drawn, so they must leave the mean alone too)
+VARIANTS = [(g, {}) for g in GUIDES] + [("photon", {"mixing": "eq14"})]
 CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96)]
 N_TESTS = len(CASES) * len(VARIANTS) * 3
 

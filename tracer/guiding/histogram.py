@@ -22,10 +22,16 @@ from the emitters, so by default (`direct` 0) the maps learn the rest: photons d
 second hit on, and a camera vertex's record leaves out the emission its direction hits. With
 `direct` 1 the maps learn the full incident light, as in the paper.
 
-The render loop (tracer/render.py) runs the schedule; this module only learns. Mixing weights:
-a = 0.5 until a voxel has `mis_min_samples` vertices of both strategies, then
-a = mean L_bsdf / (mean L_bsdf + mean L_guide), clamped to [alpha_min, alpha_max], with
-L = radiance x |f cos| of each vertex's sampled direction.
+The render loop (tracer/render.py) runs the schedule; this module only learns. Mixing weights
+(the probability a of BSDF sampling, per voxel) start at 0.5 and stay in [alpha_min, alpha_max]:
+- `mixing` eq14 (the paper's): once a voxel has `mis_min_samples` vertices of both strategies,
+  a = mean L_bsdf / (mean L_bsdf + mean L_guide), L = radiance x |f cos| of each vertex's direction.
+- `mixing` variance (default): once a voxel had `mis_min_samples` vertices in an iteration, a is
+  the one of N_ALPHA evenly spaced candidates whose one-sample estimate F / p_a has the least
+  second moment, estimated from those vertices (see _mix_moments). Eq. 14 looks at means only: where
+  a map misses light, BSDF-sampled directions carry weights up to 1/a, and along a path these
+  multiply into heavy tails (on `ajar` its one-sample relative variance ranged over 10x between
+  seeds; with `variance` it was stable and below bsdf's: README, "Path guiding").
 """
 import math
 import time
@@ -54,7 +60,7 @@ COMMON = {
     "mis_min_samples": 32,  # Q_thr of eq. 14
     "max_levels": 3,  # new tree levels per iteration at most
     "direct": 0,  # 1: maps learn direct light too; 0: only what NEE does not sample (see below)
-    "mixing": "eq14",  # eq14: the paper's mean-contribution ratio; variance: least second moment
+    "mixing": "variance",  # variance: least second moment; eq14: the paper's mean-contribution ratio
 }
 MIXING = ("eq14", "variance")
 N_ALPHA = 7  # candidate mixing weights of `mixing variance`, evenly spaced over [alpha_min, alpha_max]
