@@ -20,6 +20,13 @@ per seed. Writes to `--out` (default bench/results/convergence/):
     <scene>_time.png, _spp.png    relMSE against wall time and against spp, log-log, one line
                                   per method (median over seeds, band from min to max)
     summary.md                    per scene, each method's error at equal time as a ratio to bsdf
+    images/<scene>/<run>.npy      every run's image (float32), so that the records can be scored
+                                  again against a better reference later:
+
+    python -m bench.convergence --rescore --out bench/results/convergence [--scene-dir ../shared/scenes]
+
+re-reads the records and images in --out, recomputes every metric against the references as they
+are now, and writes records, charts and summary again (no rendering).
 """
 import argparse
 import json
@@ -68,10 +75,16 @@ def method_spec(method):
     return name, _guide_opts([o for o in opts.split(",") if o])
 
 
-def run_one(scene, method, seed, ref, time_budget=None, spp=None):
+def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
     name, settings = method_spec(method)
     r = tracer.render(scene, spp=spp, time=time_budget, guide=name, guide_settings=settings or None, seed=seed)
     s = r.stats
+    image = None
+    if images:
+        os.makedirs(images, exist_ok=True)
+        tag = method.replace(":", "_").replace(",", "_").replace("=", "-")
+        image = f"{tag}_{'t%g' % time_budget if time_budget else 'spp%d' % spp}_s{seed}.npy"
+        np.save(os.path.join(images, image), r.image.astype(np.float32))
     learning = s.get("guide_time_learning", 0.0)
     inference = s.get("guide_time_inference", 0.0)
     return {
@@ -83,6 +96,7 @@ def run_one(scene, method, seed, ref, time_budget=None, spp=None):
         "settings": {k: s[k] for k in ("max_depth", "rr_depth", "accel", "threads", "pixel_filter")},
         "metrics": metrics.all_metrics(r.image, ref),
         "nonfinite_samples": s["nonfinite_samples"],
+        "image": image,
     }
 
 
@@ -182,9 +196,49 @@ def summary_table(all_records, scenes, methods, times, floors):
     return "\n".join(lines)
 
 
+def write_outputs(out, all_records, scenes, methods, times, floors):
+    """records.jsonl, the two charts per scene and summary.md in `out`; returns the summary."""
+    with open(os.path.join(out, "records.jsonl"), "w") as log:
+        for r in all_records:
+            log.write(json.dumps(r) + "\n")
+    for name in scenes:
+        recs = [r for r in all_records if r["scene"] == name]
+        chart(recs, name, methods, "time", os.path.join(out, f"{name}_time.png"))
+        chart(recs, name, methods, "spp", os.path.join(out, f"{name}_spp.png"))
+    table = summary_table(all_records, scenes, methods, times, floors)
+    with open(os.path.join(out, "summary.md"), "w") as f:
+        f.write(table + "\n")
+    return table
+
+
+def rescore(out, scene_dir=None):
+    """Score the stored images of a run again against the references as they are now."""
+    with open(os.path.join(out, "records.jsonl")) as f:
+        records = [json.loads(line) for line in f if line.strip()]
+    if not records:
+        raise SystemExit(f"bench.convergence: {out}/records.jsonl holds no records")
+    scenes = list(dict.fromkeys(r["scene"] for r in records))
+    methods = list(dict.fromkeys(r["method"] for r in records))
+    times = sorted({r["time_budget"] for r in records if r["budget"] == "time"})
+    floors = {}
+    for name in scenes:
+        given = next(r.get("scene_path") for r in records if r["scene"] == name)
+        path = os.path.join(ROOT, given) if given and os.path.isfile(os.path.join(ROOT, given)) else None
+        ref, _, meta = reference_for(path or scene_path(name, scene_dir))
+        floors[name] = meta["noise_floor_relmse"]
+        for r in records:
+            if r["scene"] != name:
+                continue
+            if not r.get("image"):
+                raise SystemExit(f"bench.convergence: a record of {name} in {out} has no stored image")
+            image = np.load(os.path.join(out, "images", name, r["image"]))
+            r["metrics"] = metrics.all_metrics(image, ref)
+    return write_outputs(out, records, scenes, methods, times, floors)
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench.convergence", description=__doc__.splitlines()[0])
-    p.add_argument("--scenes", required=True, help="comma-separated scene names or paths")
+    p.add_argument("--scenes", help="comma-separated scene names or paths")
     p.add_argument("--methods", default="bsdf", help="comma-separated registered guide names, each with "
                    "optional settings: name:key=value,... (separate methods with ';' when settings are given)")
     p.add_argument("--time", default="10,20,40,80", help="comma-separated wall-time budgets in seconds")
@@ -192,7 +246,14 @@ def main(argv=None):
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--scene-dir", default=None, help="folder of external scenes (<dir>/<name>/scene.obj)")
     p.add_argument("--out", default=DEFAULT_OUT)
+    p.add_argument("--rescore", action="store_true", help="render nothing: score the run stored in --out "
+                   "again against the current references")
     a = p.parse_args(argv)
+    if a.rescore:
+        print(rescore(a.out, a.scene_dir))
+        return 0
+    if not a.scenes:
+        p.error("--scenes is required (unless --rescore)")
     methods = [m.strip() for m in a.methods.split(";" if ";" in a.methods else ",") if m.strip()]
     for m in methods:  # an unknown guide or setting fails now, not after an hour of runs
         name, settings = method_spec(m)
@@ -204,7 +265,7 @@ def main(argv=None):
     all_records = []
     floors = {}
     scenes = [s.strip() for s in a.scenes.split(",") if s.strip()]
-    with open(os.path.join(a.out, "records.jsonl"), "w") as log:
+    with open(os.path.join(a.out, "records.jsonl"), "w") as log:  # written as runs finish, in case of a stop
         for i, given in enumerate(scenes):
             path = scene_path(given, a.scene_dir)
             name = os.path.splitext(os.path.basename(given))[0] if given.endswith((".obj", ".json")) else given
@@ -212,12 +273,13 @@ def main(argv=None):
             ref, _, ref_meta = reference_for(path)
             floors[name] = ref_meta["noise_floor_relmse"]
             scene = tracer.load_scene(path)
+            images = os.path.join(a.out, "images", name)
             tracer.render(scene, spp=1)  # compile and warm up outside every budget
             recs = []
             for m in methods:
                 for seed in range(a.seeds):
                     for t in times:
-                        recs.append(run_one(scene, m, seed, ref, time_budget=t))
+                        recs.append(run_one(scene, m, seed, ref, time_budget=t, images=images))
                         print(f"{name} {m} seed {seed} time {t:g}s: {recs[-1]['spp']} spp, "
                               f"relMSE {recs[-1]['metrics']['relMSE']:.4g}", flush=True)
             spps = ([int(s) for s in a.spp.split(",")] if a.spp else  # bsdf's median spp per time budget
@@ -227,19 +289,16 @@ def main(argv=None):
             for m in (methods if a.spp else [m for m in methods if m != "bsdf"]):
                 for seed in range(a.seeds):
                     for n in spps:
-                        recs.append(run_one(scene, m, seed, ref, spp=n))
+                        recs.append(run_one(scene, m, seed, ref, spp=n, images=images))
             for r in recs:
                 r["scene"] = name
+                r["scene_path"] = os.path.relpath(path, ROOT)
                 r["machine"] = f"{platform.machine()}, {os.cpu_count()} cores"
                 r["date"] = time.strftime("%Y-%m-%d %H:%M")
                 log.write(json.dumps(r) + "\n")
+            log.flush()
             all_records += recs
-            chart(recs, name, methods, "time", os.path.join(a.out, f"{name}_time.png"))
-            chart(recs, name, methods, "spp", os.path.join(a.out, f"{name}_spp.png"))
-    table = summary_table(all_records, scenes, methods, times, floors)
-    with open(os.path.join(a.out, "summary.md"), "w") as f:
-        f.write(table + "\n")
-    print(table)
+    print(write_outputs(a.out, all_records, scenes, methods, times, floors))
     return 0
 
 

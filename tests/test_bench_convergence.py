@@ -57,3 +57,33 @@ def test_method_specs_carry_guide_settings():
     from tracer.errors import SettingsError
     with pytest.raises(SettingsError, match="no setting 'colour'"):
         convergence.main(["--scenes", "cornell", "--methods", "bsdf,photon:colour=red", "--out", "/nonexistent"])
+
+
+def test_rescore_scores_the_stored_images_against_the_current_reference(tmp_path, monkeypatch):
+    """--rescore renders nothing: it reads each run's stored image and scores it again, so a
+    reference extended later judges the runs already made."""
+    import numpy as np
+
+    import tracer
+    from tracer import metrics
+
+    obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=8, height=8)
+    ref_dir = tmp_path / "ref"
+    monkeypatch.setattr(convergence, "default_out", lambda path: str(ref_dir))
+    assert reference.main([obj, "--spp", "16", "--out", str(ref_dir)]) == 0
+    out = tmp_path / "conv"
+    assert convergence.main(["--scenes", obj, "--time", "0.05", "--seeds", "2", "--out", str(out)]) == 0
+    before = [json.loads(line) for line in open(out / "records.jsonl")]
+    # A different reference: twice the radiance, no variance, four times the spp
+    data = tracer.read_image(str(ref_dir / "reference.exr")).astype(np.float64)
+    data[:, :, :3] *= 2.0
+    data[:, :, 3:] = 0.0
+    tracer.write_image(str(ref_dir / "reference.exr"), data, channel_names=reference.CHANNELS)
+    assert convergence.main(["--rescore", "--out", str(out)]) == 0
+    after = [json.loads(line) for line in open(out / "records.jsonl")]
+    assert len(after) == len(before)
+    for b, a in zip(before, after):
+        image = np.load(out / "images" / "box" / a["image"])
+        assert a["metrics"] == metrics.all_metrics(image, data[:, :, :3])
+        assert a["metrics"]["relMSE"] > b["metrics"]["relMSE"]  # the image is about half the new reference
+        assert {k: v for k, v in a.items() if k != "metrics"} == {k: v for k, v in b.items() if k != "metrics"}
