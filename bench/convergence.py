@@ -129,15 +129,23 @@ def chart(records, scene, methods, x_key, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+
     fig, ax = plt.subplots(figsize=(5, 3.6), dpi=110)
+    ticks = set()
     for m in methods:
         x, med, lo, hi = _band(records, m, x_key)
         if len(x) == 0:
             continue
+        ticks.update(float(f"{v:.2g}") for v in x)
         ax.plot(x, med, marker="o", label=m)
         ax.fill_between(x, lo, hi, alpha=0.2)
     ax.set_xscale("log")
     ax.set_yscale("log")
+    if ticks:  # the budgets themselves as plain numbers, not crowded minor labels
+        ax.set_xticks(sorted(ticks))
+        ax.xaxis.set_major_formatter(ScalarFormatter())
+        ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("wall time [s]" if x_key == "time" else "samples per pixel")
     ax.set_ylabel("relMSE")
     ax.set_title(f"{scene}: relMSE vs {'time' if x_key == 'time' else 'spp'}")
