@@ -33,15 +33,21 @@ def test_reference_floor_check():
     assert convergence.floor_check(recs, 0.005)[0] is False
 
 
-def test_default_spp_budgets_do_not_rerun_bsdf(tmp_path, monkeypatch):
-    """Without --spp the spp budgets are bsdf's own spp at each time budget: bsdf is not rendered
-    again at them, its time runs are its points on the spp chart."""
+def _box_run_at_one_time_budget(tmp_path, monkeypatch):
+    """A 16-spp reference of a tiny closed box and a bsdf run at 0.05 s, 2 seeds: (out, ref_dir)."""
     obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=8, height=8)
     ref_dir = tmp_path / "ref"
     monkeypatch.setattr(convergence, "default_out", lambda path: str(ref_dir))
     assert reference.main([obj, "--spp", "16", "--out", str(ref_dir)]) == 0
     out = tmp_path / "conv"
     assert convergence.main(["--scenes", obj, "--time", "0.05", "--seeds", "2", "--out", str(out)]) == 0
+    return out, ref_dir
+
+
+def test_default_spp_budgets_do_not_rerun_bsdf(tmp_path, monkeypatch):
+    """Without --spp the spp budgets are bsdf's own spp at each time budget: bsdf is not rendered
+    again at them, its time runs are its points on the spp chart."""
+    out, ref_dir = _box_run_at_one_time_budget(tmp_path, monkeypatch)
     recs = [json.loads(line) for line in open(out / "records.jsonl")]
     assert [r["budget"] for r in recs] == ["time", "time"]
     x, med, lo, hi = convergence._band(recs, "bsdf", "spp")
@@ -67,14 +73,9 @@ def test_rescore_scores_the_stored_images_against_the_current_reference(tmp_path
     import tracer
     from tracer import metrics
 
-    obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=8, height=8)
-    ref_dir = tmp_path / "ref"
-    monkeypatch.setattr(convergence, "default_out", lambda path: str(ref_dir))
-    assert reference.main([obj, "--spp", "16", "--out", str(ref_dir)]) == 0
-    out = tmp_path / "conv"
-    assert convergence.main(["--scenes", obj, "--time", "0.05", "--seeds", "2", "--out", str(out)]) == 0
+    out, ref_dir = _box_run_at_one_time_budget(tmp_path, monkeypatch)
     before = [json.loads(line) for line in open(out / "records.jsonl")]
-    # A different reference: twice the radiance, no variance, four times the spp
+    # A different reference: twice the radiance, no variance
     data = tracer.read_image(str(ref_dir / "reference.exr")).astype(np.float64)
     data[:, :, :3] *= 2.0
     data[:, :, 3:] = 0.0
