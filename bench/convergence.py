@@ -231,8 +231,7 @@ def rescore(out, scene_dir=None):
     floors = {}
     for name in scenes:
         given = next(r.get("scene_path") for r in records if r["scene"] == name)
-        path = os.path.join(ROOT, given) if given and os.path.isfile(os.path.join(ROOT, given)) else None
-        ref, _, meta = reference_for(path or scene_path(name, scene_dir))
+        ref, _, meta = reference_for(os.path.join(ROOT, given) if given else scene_path(name, scene_dir))
         floors[name] = meta["noise_floor_relmse"]
         for r in records:
             if r["scene"] != name:
