@@ -1,10 +1,12 @@
 """Directional maps, their alias tables, the reconstruction filters and the hierarchical grid."""
+import math
+
 import numpy as np
 import pytest
 
 from tests.chi2 import histogram_test
 from tracer.errors import SettingsError
-from tracer.guiding.directional import bin_of_batch, build_tables, map_pdf_batch, map_sample_batch
+from tracer.guiding.directional import bin_of_batch, build_tables, map_pdf_batch, map_sample_batch, probabilities
 from tracer.guiding.reconstruct import make_reconstructor
 from tracer.guiding.spatial import HierarchicalGrid
 
@@ -21,30 +23,54 @@ def test_bins_round_trip_and_cover_equal_solid_angles():
     assert passed, msg
 
 
+def test_fast_bins_are_the_atan2_bins():
+    """direction_bin's fast atan2 never moves a direction to another column than libm's atan2:
+    random directions, the axes (signed zeros included) and points 1e-9 of a bin from its edges."""
+    rng = np.random.default_rng(4)
+    d = rng.normal(size=(500_000, 3))
+    axes = np.array([[1, 0, 0], [-1, 0, 0], [-1, -0.0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1],
+                     [1, 1, 0], [-1, 1, 0], [-1, -1, 0], [1, -1, 0]], float)
+    phi = -np.pi + 2 * np.pi * np.repeat(np.arange(W + 1), 3) / W + np.tile([-1e-9, 0.0, 1e-9], W + 1)
+    edges = np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
+    d = np.concatenate([d / np.linalg.norm(d, axis=1, keepdims=True), axes / np.linalg.norm(axes, axis=1, keepdims=True), edges])
+    row = np.clip(((d[:, 2] + 1) * 0.5 * H).astype(np.int64), 0, H - 1)
+    col = np.clip(((np.array([math.atan2(y, x) for x, y in d[:, :2]]) + np.pi) * (0.5 / np.pi) * W).astype(np.int64), 0, W - 1)
+    np.testing.assert_array_equal(bin_of_batch(d, H, W), row * W + col)
+
+
 def test_alias_table_realises_the_map():
     rng = np.random.default_rng(1)
     maps = rng.random((5, H, W)) ** 4
     maps[1, :, :5] = 0.0
     maps[2] = 0.0
     maps[3, 2, 3] = 1e6  # one dominant bin
-    table, usable = build_tables(maps)
-    prob = table[:, :, 2].astype(np.float64)
+    tabs = build_tables(maps)
+    prob = probabilities(tabs)
+    usable = tabs.usable
     assert list(usable) == [True, True, False, True, True]
-    # P(alias) of every entry is the P of the bin it points to
-    alias = table[:, :, 1].astype(np.int64)
-    np.testing.assert_array_equal(table[:, :, 3], np.take_along_axis(table[:, :, 2], alias, axis=1))
+    # the table realises w / W exactly: each bin's share of the K entries, counted in integers
+    K = H * W
+    q = tabs.table[:, :, 0].astype(np.int64)
+    alias = tabs.table[:, :, 1].astype(np.int64)
+    for s in np.flatnonzero(usable):
+        Wt = int(tabs.wsum[s])
+        assert Wt == int(tabs.dens[s].astype(np.int64).sum()) and (q[s] <= Wt).all()
+        share = np.bincount(np.arange(K), weights=q[s], minlength=K) + np.bincount(alias[s], weights=Wt - q[s], minlength=K)
+        np.testing.assert_array_equal(share, tabs.dens[s].astype(np.int64) * K)
+    # quantised to 16 bits of the largest bin
     target = maps.reshape(5, -1) / np.maximum(maps.reshape(5, -1).sum(axis=1, keepdims=True), 1e-300)
-    np.testing.assert_allclose(prob[usable], target[usable], rtol=1e-6, atol=1e-12)
+    err = np.abs(prob - target)[usable]
+    assert (err <= 2.0 / 65535 * target[usable].max(axis=1, keepdims=True)).all(), err.max()
     assert (prob[1].reshape(H, W)[:, :5] == 0).all() and (prob[2] == 0).all()
     # sampling frequencies per bin match prob (chi-square), and the pdf matches the bin
     u = rng.random((400_000, 2))
     for slot in (0, 1, 3):
-        d, p = map_sample_batch(table, slot, H, W, u)
+        d, p = map_sample_batch(tabs, slot, H, W, u)
         b = bin_of_batch(d, H, W)
         passed, msg = histogram_test(np.bincount(b, minlength=H * W), prob[slot] * u.shape[0], ntests=3)
         assert passed, msg
         np.testing.assert_allclose(p, prob[slot, b] * H * W / (4 * np.pi), rtol=1e-12)
-        np.testing.assert_allclose(map_pdf_batch(table, slot, H, W, d), p, rtol=1e-12)
+        np.testing.assert_allclose(map_pdf_batch(tabs, slot, H, W, d), p, rtol=1e-12)
 
 
 def test_gaussian_keeps_mass_and_pullpush_fills_holes():

@@ -33,7 +33,9 @@ class GuideState(NamedTuple):
     split: np.ndarray  # (N,) float64 split plane (x[axis] >= split goes right)
     slot: np.ndarray  # (N,) int32 sampling map of a leaf, -1 where it has none
     alpha: np.ndarray  # (N,) float64 probability of BSDF sampling at a leaf with a map
-    table: np.ndarray  # (S, K, 4) float32 alias tables of the maps (see directional)
+    table: np.ndarray  # (S, K, 2) uint32 alias tables of the maps (see directional)
+    dens: np.ndarray  # (S, K) uint16 integer weights of the maps' bins
+    wsum: np.ndarray  # (S,) float64 their totals
     n_theta: int
     n_phi: int
 
@@ -42,7 +44,8 @@ def empty_state(n_theta=2, n_phi=2):
     """A state with no grid: every lookup misses, so every vertex samples its BSDF."""
     return GuideState(np.zeros(3), np.ones(3), np.zeros(3, np.int64), np.full(1, -1, np.int32),
                       np.zeros(1, np.int32), np.zeros(1), np.full(1, -1, np.int32), np.ones(1),
-                      np.zeros((1, n_theta * n_phi, 4), np.float32), int(n_theta), int(n_phi))
+                      np.zeros((1, n_theta * n_phi, 2), np.uint32), np.zeros((1, n_theta * n_phi), np.uint16),
+                      np.ones(1), int(n_theta), int(n_phi))
 
 
 @jit(inline="always")
@@ -65,12 +68,12 @@ def find_voxel(gs, x):
 @jit(inline="always")
 def voxel_sample(gs, node, u0, u1):
     """(direction, pdf) from the map of leaf `node` (which must have one)."""
-    return map_sample(gs.table, gs.slot[node], gs.n_theta, gs.n_phi, u0, u1)
+    return map_sample(gs.table, gs.dens, gs.wsum, gs.slot[node], gs.n_theta, gs.n_phi, u0, u1)
 
 
 @jit(inline="always")
 def voxel_pdf(gs, node, d):
-    return map_pdf(gs.table, gs.slot[node], gs.n_theta, gs.n_phi, d)
+    return map_pdf(gs.dens, gs.wsum, gs.slot[node], gs.n_theta, gs.n_phi, d)
 
 
 # --- The sampler contract of DESIGN.md: sample(state, x, n, wo, u), pdf(state, x, n, wi) -------
@@ -182,7 +185,9 @@ class HierarchicalGrid:
         self.power = np.zeros((scap, self.K), np.float32)
         self.count = np.zeros((scap, self.K), np.float32)
         self.prev = np.zeros((scap, self.K), np.float32)  # the previous iteration's normalised map
-        self.table = np.zeros((scap, self.K, 4), np.float32)
+        self.table = np.zeros((scap, self.K, 2), np.uint32)
+        self.dens = np.zeros((scap, self.K), np.uint16)
+        self.wsum = np.ones(scap)
         self.slot_node = np.full(scap, -1, np.int64)
         self.free = []
         self.n_slots = 0
@@ -209,7 +214,7 @@ class HierarchicalGrid:
             self.n_slots += 1
             cap = self.power.shape[0]
             if self.n_slots > cap:
-                for name in ("power", "count", "prev", "table", "slot_node"):
+                for name in ("power", "count", "prev", "table", "dens", "wsum", "slot_node"):
                     a = getattr(self, name)
                     b = np.zeros((2 * cap,) + a.shape[1:], a.dtype) if name != "slot_node" else np.full(2 * cap, -1, a.dtype)
                     b[:cap] = a
@@ -217,7 +222,9 @@ class HierarchicalGrid:
         self.power[s] = 0.0
         self.count[s] = 0.0
         self.prev[s] = 0.0
-        self.table[s] = 0.0
+        self.table[s] = 0
+        self.dens[s] = 0
+        self.wsum[s] = 1.0
         self.slot_node[s] = node
         self.data_slot[node] = s
         self.map_ok[node] = False
@@ -241,7 +248,7 @@ class HierarchicalGrid:
     def memory_bytes(self):
         arrays = (self.child, self.axis, self.split, self.depth, self.box_lo, self.box_hi, self.node_count,
                   self.last_visit, self.alpha, self.mis_sum, self.mis_n, self.data_slot, self.map_ok,
-                  self.power, self.count, self.prev, self.table, self.slot_node)
+                  self.power, self.count, self.prev, self.table, self.dens, self.wsum, self.slot_node)
         return int(sum(a.nbytes for a in arrays))
 
     # --- what the kernels read ---------------------------------------------------------------
@@ -251,7 +258,7 @@ class HierarchicalGrid:
         m = max(self.n_slots, 1)
         return GuideState(self.lo.copy(), np.full(3, 1.0 / self.side), self.res.astype(np.int64),
                           self.child[:n], self.axis[:n], self.split[:n], slot, self.alpha[:n],
-                          self.table[:m], self.n_theta, self.n_phi)
+                          self.table[:m], self.dens[:m], self.wsum[:m], self.n_theta, self.n_phi)
 
     def lookup_state(self):
         """A state for locating points only (no maps)."""
@@ -307,7 +314,7 @@ class HierarchicalGrid:
             self.slot_node[s] = c
             self.map_ok[c] = self.map_ok[node]
             s2 = self._new_slot(c + 1)
-            for name in ("power", "count", "prev", "table"):
+            for name in ("power", "count", "prev", "table", "dens", "wsum"):
                 getattr(self, name)[s2] = getattr(self, name)[s]
             self.map_ok[c + 1] = self.map_ok[node]
             self.map_ok[node] = False
