@@ -249,7 +249,7 @@ def main(argv=None):
     p.add_argument("--methods", default="bsdf", help="comma-separated registered guide names, each with "
                    "optional settings: name:key=value,... (separate methods with ';' when settings are given)")
     p.add_argument("--time", default="10,20,40,80", help="comma-separated wall-time budgets in seconds")
-    p.add_argument("--spp", default=None, help="comma-separated spp budgets (default: what bsdf reached)")
+    p.add_argument("--spp", default=None, help="comma-separated spp budgets (default: what bsdf reached; none: time budgets only)")
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--scene-dir", default=None, help="folder of external scenes (<dir>/<name>/scene.obj)")
     p.add_argument("--out", default=DEFAULT_OUT)
@@ -283,13 +283,14 @@ def main(argv=None):
             images = os.path.join(a.out, "images", name)
             tracer.render(scene, spp=1)  # compile and warm up outside every budget
             recs = []
-            for m in methods:
-                for seed in range(a.seeds):
-                    for t in times:
+            # methods interleaved, so that a drift of the machine's speed touches them alike
+            for seed in range(a.seeds):
+                for t in times:
+                    for m in methods:
                         recs.append(run_one(scene, m, seed, ref, time_budget=t, images=images))
                         print(f"{name} {m} seed {seed} time {t:g}s: {recs[-1]['spp']} spp, "
                               f"relMSE {recs[-1]['metrics']['relMSE']:.4g}", flush=True)
-            spps = ([int(s) for s in a.spp.split(",")] if a.spp else  # bsdf's median spp per time budget
+            spps = ([] if a.spp == "none" else [int(s) for s in a.spp.split(",")] if a.spp else  # bsdf's median spp per time budget
                     sorted({int(np.median([r["spp"] for r in recs if r["method"] == "bsdf" and r["time_budget"] == t]))
                             for t in times}))
             # bsdf's own spp points are its time runs (the default spp budgets are its median spp)

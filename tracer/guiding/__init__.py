@@ -56,6 +56,11 @@ def warm_up_guides(ctx):
     grid.visit(grid.locate(np.full((1, 3), 0.5)), 0)
     grid.accumulate(np.zeros(1, np.int64), bin_of_batch(np.array([[0.0, 0.0, 1.0]]), 2, 2), np.ones(1))
     build_tables(grid.power[:1].reshape(1, 2, 2))
+    from ..integrator import Records
+
+    rec = Records.allocate(1)
+    grid.visit_records(rec, 0)
+    grid.splat_records(rec)
     from .histogram import _mis_stats
     from .reconstruct import Gaussian
 

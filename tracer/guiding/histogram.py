@@ -190,14 +190,13 @@ class HistogramGuide:
     def observe(self, rec):
         """Vertices of one wave of camera paths (a Records view)."""
         t0 = time.perf_counter()
-        keep = rec.strategy >= 0
-        self.info["vertices"] += int(keep.sum())
         if self.grid is None:
+            keep = rec.strategy >= 0
+            self.info["vertices"] += int(keep.sum())
             self._pilot.append({f: np.array(getattr(rec, f)[keep]) for f in ("x", "wi", "pdf", "radiance")})
         else:
             g = self.grid
-            nodes = rec.node[keep].astype(np.int64)
-            g.visit(nodes, self.iteration)
+            self.info["vertices"] += g.visit_records(rec, self.iteration)
             _mis_stats(rec.node, rec.strategy, rec.radiance, rec.fcos, g.mis_sum, g.mis_n)
             if self.mixing == "variance":
                 if self._mom is None or self._mom.shape[0] < g.alpha.shape[0]:
@@ -205,7 +204,7 @@ class HistogramGuide:
                     self._mom_n = np.zeros(g.alpha.shape[0])
                 _mix_moments(rec.node, rec.strategy, rec.radiance, rec.fcos, rec.pdf, rec.pb, g.alpha,
                              self.alpha_candidates, self._mom, self._mom_n)
-            self._observe_data(rec, keep)
+            self._observe_data(rec)
         self.time_learning += time.perf_counter() - t0
 
     def update(self):
@@ -320,7 +319,7 @@ class HistogramGuide:
     def _initial_data(self, pilot):
         raise NotImplementedError
 
-    def _observe_data(self, rec, keep):
+    def _observe_data(self, rec):
         pass
 
     def _iterate_data(self):
@@ -337,10 +336,9 @@ class GridGuide(HistogramGuide):
     # coarser and smoother than the photon maps: camera-path estimates (radiance / pdf) are noisier
     DEFAULTS = dict(COMMON, split_c=4000.0, resolution=8, sigma=2.0)
 
-    def _splat(self, x, wi, pdf, radiance, nodes=None):
+    def _splat(self, x, wi, pdf, radiance):
         g = self.grid
-        if nodes is None:
-            nodes = g.locate(x.astype(np.float64))
+        nodes = g.locate(x.astype(np.float64))
         bins = bin_of_batch(np.ascontiguousarray(wi, dtype=np.float64), self.map_height, self.map_width)
         val = np.where(pdf > 0, radiance.astype(np.float64) / np.maximum(pdf.astype(np.float64), 1e-30), 0.0)
         g.accumulate(nodes, bins, val)
@@ -351,8 +349,8 @@ class GridGuide(HistogramGuide):
         g.node_count[:] = 0.0
         self._splat(pilot["x"], pilot["wi"], pilot["pdf"], pilot["radiance"])
 
-    def _observe_data(self, rec, keep):
-        self._splat(rec.x[keep], rec.wi[keep], rec.pdf[keep], rec.radiance[keep], rec.node[keep].astype(np.int64))
+    def _observe_data(self, rec):
+        self.grid.splat_records(rec)
 
     def _after_reconstruct(self):
         g = self.grid  # maps are rebuilt from each iteration's vertices alone

@@ -19,7 +19,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit, kernel
-from .directional import map_pdf, map_sample
+from .directional import direction_bin, map_pdf, map_sample
 
 
 class GuideState(NamedTuple):
@@ -145,6 +145,41 @@ def accumulate(node, bins, value, node_slot, power, count, node_count):
         node_count[nd] += 1.0
         kept += 1
     return kept
+
+
+@jit
+def _visit_records(node, strategy, iteration, last_visit, data_slot, missing):
+    """Mark the leaves of the records (strategy >= 0) visited in `iteration`, and in `missing` those
+    without a data slot. Returns the number of records."""
+    n = 0
+    for i in range(node.shape[0]):
+        if strategy[i] < 0:
+            continue
+        n += 1
+        nd = node[i]
+        if nd < 0:
+            continue
+        last_visit[nd] = iteration
+        if data_slot[nd] < 0:
+            missing[nd] = True
+    return n
+
+
+@jit
+def _splat_records(node, strategy, wi, pdf, radiance, n_theta, n_phi, data_slot, power, count, node_count):
+    """radiance / pdf of every record into its leaf's histogram, in the bin of its direction."""
+    for i in range(node.shape[0]):
+        nd = node[i]
+        if strategy[i] < 0 or nd < 0:
+            continue
+        s = data_slot[nd]
+        if s < 0:
+            continue
+        b = direction_bin((float(wi[i, 0]), float(wi[i, 1]), float(wi[i, 2])), n_theta, n_phi)
+        p = float(pdf[i])
+        power[s, b] += radiance[i] / p if p > 0.0 else 0.0
+        count[s, b] += 1.0
+        node_count[nd] += 1.0
 
 
 class HierarchicalGrid:
@@ -275,6 +310,19 @@ class HierarchicalGrid:
         self.last_visit[nodes] = iteration
         for nd in nodes[self.data_slot[nodes] < 0]:
             self._new_slot(int(nd))
+
+    def visit_records(self, rec, iteration):
+        """visit() for the leaves of a wave's records (a Records view); returns how many records."""
+        missing = np.zeros(self.n_nodes, np.bool_)
+        n = _visit_records(rec.node, rec.strategy, iteration, self.last_visit, self.data_slot, missing)
+        for nd in np.flatnonzero(missing):
+            self._new_slot(int(nd))
+        return n
+
+    def splat_records(self, rec):
+        """Each record's radiance / pdf into its leaf's histogram (the `grid` guide's data)."""
+        _splat_records(rec.node, rec.strategy, rec.wi, rec.pdf, rec.radiance, self.n_theta, self.n_phi,
+                       self.data_slot, self.power, self.count, self.node_count)
 
     def recycle(self, iteration, after=2):
         """Release the slots of leaves that no camera vertex visited in the last `after` iterations."""
