@@ -237,10 +237,7 @@ class HistogramGuide:
             raise SettingsError(f"map must be {self.map_height}x{self.map_width}, got {m.shape}")
         g = HierarchicalGrid(-np.ones(3), np.ones(3), 1, self.map_height, self.map_width)
         g.visit(np.arange(g.n_cells), 0)
-        tabs = build_tables(np.repeat(m[None], g.n_cells, axis=0))
-        slots = g.data_slot[: g.n_cells]
-        g.table[slots], g.dens[slots], g.wsum[slots] = tabs.table, tabs.dens, tabs.wsum
-        g.map_ok[: g.n_cells] = tabs.usable
+        g.set_maps(g.data_slot[: g.n_cells], build_tables(np.repeat(m[None], g.n_cells, axis=0)))
         return g.state()
 
     def memory_bytes(self):
@@ -288,10 +285,8 @@ class HistogramGuide:
         maps = _normalised(g.power, slots, total).reshape(-1, self.map_height, self.map_width)
         counts = g.count[slots].reshape(maps.shape)
         rec = self.reconstructor.reconstruct(maps, counts, counts > 0)
-        tabs = build_tables(rec)
-        g.table[slots], g.dens[slots], g.wsum[slots] = tabs.table, tabs.dens, tabs.wsum
+        g.set_maps(slots, build_tables(rec))
         g.prev[slots] = maps.reshape(slots.size, -1)
-        g.map_ok[g.slot_node[slots]] = tabs.usable
 
     def _choose_alpha(self):
         """`mixing variance`: each voxel with mis_min_samples vertices this iteration takes the

@@ -305,19 +305,24 @@ class HierarchicalGrid:
 
     # --- visits, slots ------------------------------------------------------------------------
     def visit(self, nodes, iteration):
-        """Camera vertices landed in these leaves: they are valid now (slots for new ones)."""
-        nodes = np.unique(nodes[nodes >= 0])
-        self.last_visit[nodes] = iteration
-        for nd in nodes[self.data_slot[nodes] < 0]:
-            self._new_slot(int(nd))
+        """Camera vertices landed in these leaves (-1: none): they are valid now (slots for new ones)."""
+        self._visit(nodes, np.zeros(nodes.shape[0], np.int8), iteration)
 
     def visit_records(self, rec, iteration):
         """visit() for the leaves of a wave's records (a Records view); returns how many records."""
+        return self._visit(rec.node, rec.strategy, iteration)
+
+    def _visit(self, nodes, strategy, iteration):
         missing = np.zeros(self.n_nodes, np.bool_)
-        n = _visit_records(rec.node, rec.strategy, iteration, self.last_visit, self.data_slot, missing)
+        n = _visit_records(nodes, strategy, iteration, self.last_visit, self.data_slot, missing)
         for nd in np.flatnonzero(missing):
             self._new_slot(int(nd))
         return n
+
+    def set_maps(self, slots, tabs):
+        """The sampling tables (directional.MapTables) of the maps in these data slots."""
+        self.table[slots], self.dens[slots], self.wsum[slots] = tabs.table, tabs.dens, tabs.wsum
+        self.map_ok[self.slot_node[slots]] = tabs.usable
 
     def splat_records(self, rec):
         """Each record's radiance / pdf into its leaf's histogram (the `grid` guide's data)."""
