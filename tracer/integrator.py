@@ -172,8 +172,9 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         # The guide's voxel and the mixing weight a (probability of BSDF sampling; 1 = no guide)
         node = -1
         a = 1.0
+        nf = ng if cos_o >= 0.0 else (-ng[0], -ng[1], -ng[2])  # normal on the side the path arrived
         if gs.res[0] > 0 and not delta:
-            node = find_voxel(gs, x)
+            node = find_voxel(gs, x, nf)
             if node >= 0 and gs.slot[node] >= 0:
                 a = gs.alpha[node]
 
@@ -256,7 +257,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             r_fcos[r] = (0.2126 * wt[0] + 0.7152 * wt[1] + 0.0722 * wt[2]) * pdf
             for c in range(3):
                 r_x[r, c] = x[c]
-                r_n[r, c] = ng[c]
+                r_n[r, c] = nf[c]
                 r_wi[r, c] = wiw[c]
                 r_L0[r, c] = L[i, c]
                 r_beta[r, c] = nb[c] if ok else 0.0
@@ -346,7 +347,7 @@ class Records(NamedTuple):
     """Path vertices of a wave, for guides that learn (R entries; strategy -1 = unused entry)."""
 
     x: np.ndarray  # (R, 3) float32 position
-    n: np.ndarray  # (R, 3) float32 geometric normal
+    n: np.ndarray  # (R, 3) float32 geometric normal, on the side the path arrived from
     wi: np.ndarray  # (R, 3) float32 sampled world direction
     pdf: np.ndarray  # (R,) float32 density it was sampled with (the MIS mixture)
     fcos: np.ndarray  # (R,) float32 luminance of f(wo, wi) |cos|

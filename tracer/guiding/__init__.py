@@ -52,8 +52,8 @@ def warm_up_guides(ctx):
     from .spatial import HierarchicalGrid, empty_state
 
     trace_photons(ctx, empty_state(), np.full(1, -1, np.int32), 1, 0, lambda *a: None, wave_size=1)
-    grid = HierarchicalGrid(np.zeros(3), np.ones(3), 2, 2, 2)
-    grid.visit(grid.locate(np.full((1, 3), 0.5)), 0)
+    grid = HierarchicalGrid(np.zeros(3), np.ones(3), 2, 2, 2, 6)
+    grid.visit(grid.locate(np.full((1, 3), 0.5), np.array([[0.0, 0.0, 1.0]])), 0)
     grid.accumulate(np.zeros(1, np.int64), bin_of_batch(np.array([[0.0, 0.0, 1.0]]), 2, 2), np.ones(1))
     build_tables(grid.power[:1].reshape(1, 2, 2))
     from ..integrator import Records

@@ -22,6 +22,15 @@ from the emitters, so by default (`direct` 0) the maps learn the rest: photons d
 second hit on, and a camera vertex's record leaves out the emission its direction hits. With
 `direct` 1 the maps learn the full incident light, as in the paper.
 
+Sides of surfaces (`normal_classes` 6, the default): a cell holds six trees, one per class of the
+normal on the side of the surface that a camera path or photon arrives on (its dominant axis and
+sign). A voxel's map then holds only the light that reaches surfaces facing one way: a wall's map
+no longer holds the light on the floor beside it, nor, for a thin wall, the light on its other
+side, both of which lie behind the wall and send guided samples where the BSDF is zero. On `ajar`
+(photon, maps trained on 128 spp, 64 spp frozen, 3 seeds) 18% of guided directions were below
+the surface with one class, 1% with six; relMSE fell from 0.236 to 0.122 (bsdf: 0.38); on
+`cornell` from 1.45e-3 to 1.19e-3 (bsdf: 2.75e-3). `normal_classes` 1 is the paper's one map per voxel.
+
 The render loop (tracer/render.py) runs the schedule; this module only learns. Mixing weights
 (the probability a of BSDF sampling, per voxel) start at 0.5 and stay in [alpha_min, alpha_max]:
 - `mixing` eq14 (the paper's): once a voxel has `mis_min_samples` vertices of both strategies,
@@ -61,6 +70,7 @@ COMMON = {
     "max_levels": 3,  # new tree levels per iteration at most
     "direct": 0,  # 1: maps learn direct light too; 0: only what NEE does not sample (see below)
     "mixing": "variance",  # variance: least second moment; eq14: the paper's mean-contribution ratio
+    "normal_classes": 6,  # 6: a voxel keeps one map per side of its surfaces (see below); 1: one map
 }
 MIXING = ("eq14", "variance")
 N_ALPHA = 7  # candidate mixing weights of `mixing variance`, evenly spaced over [alpha_min, alpha_max]
@@ -161,6 +171,9 @@ class HistogramGuide:
         if s["mixing"] not in MIXING:
             raise SettingsError(f"guide setting mixing: unknown {s['mixing']!r}; valid: " + ", ".join(MIXING))
         self.mixing = s["mixing"]
+        if s["normal_classes"] not in (1, 6) or isinstance(s["normal_classes"], bool):
+            raise SettingsError(f"guide setting normal_classes must be 1 or 6, got {s['normal_classes']!r}")
+        self.n_class = int(s["normal_classes"])
         self.alpha_candidates = np.linspace(self.alpha_min, self.alpha_max, N_ALPHA)
         if s["reconstruct"] not in RECONSTRUCTORS:
             raise SettingsError(f"guide setting reconstruct: unknown {s['reconstruct']!r}; valid: "
@@ -193,7 +206,7 @@ class HistogramGuide:
         if self.grid is None:
             keep = rec.strategy >= 0
             self.info["vertices"] += int(keep.sum())
-            self._pilot.append({f: np.array(getattr(rec, f)[keep]) for f in ("x", "wi", "pdf", "radiance")})
+            self._pilot.append({f: np.array(getattr(rec, f)[keep]) for f in ("x", "n", "wi", "pdf", "radiance")})
         else:
             g = self.grid
             self.info["vertices"] += g.visit_records(rec, self.iteration)
@@ -235,7 +248,7 @@ class HistogramGuide:
         m = np.asarray(sampling_map, dtype=np.float32)
         if m.shape != (self.map_height, self.map_width):
             raise SettingsError(f"map must be {self.map_height}x{self.map_width}, got {m.shape}")
-        g = HierarchicalGrid(-np.ones(3), np.ones(3), 1, self.map_height, self.map_width)
+        g = HierarchicalGrid(-np.ones(3), np.ones(3), 1, self.map_height, self.map_width, self.n_class)
         g.visit(np.arange(g.n_cells), 0)
         g.set_maps(g.data_slot[: g.n_cells], build_tables(np.repeat(m[None], g.n_cells, axis=0)))
         return g.state()
@@ -268,8 +281,9 @@ class HistogramGuide:
             return  # no camera vertex: no grid, BSDF sampling everywhere
         lo, hi = x.min(axis=0), x.max(axis=0)
         pad = 1e-4 * max(float(np.linalg.norm(hi - lo)), 1e-6)
-        g = self.grid = HierarchicalGrid(lo - pad, hi + pad, self.resolution, self.map_height, self.map_width)
-        g.visit(g.locate(x), 0)
+        g = self.grid = HierarchicalGrid(lo - pad, hi + pad, self.resolution, self.map_height, self.map_width,
+                                         self.n_class)
+        g.visit(g.locate(x, pts["n"]), 0)
         self._initial_data(pts)
 
     def _reconstruct(self):
@@ -331,18 +345,18 @@ class GridGuide(HistogramGuide):
     # coarser and smoother than the photon maps: camera-path estimates (radiance / pdf) are noisier
     DEFAULTS = dict(COMMON, split_c=4000.0, resolution=8, sigma=2.0)
 
-    def _splat(self, x, wi, pdf, radiance):
+    def _splat(self, x, n, wi, pdf, radiance):
         g = self.grid
-        nodes = g.locate(x.astype(np.float64))
+        nodes = g.locate(x, n)
         bins = bin_of_batch(np.ascontiguousarray(wi, dtype=np.float64), self.map_height, self.map_width)
         val = np.where(pdf > 0, radiance.astype(np.float64) / np.maximum(pdf.astype(np.float64), 1e-30), 0.0)
         g.accumulate(nodes, bins, val)
 
     def _initial_data(self, pilot):
         g = self.grid
-        g.split_median(pilot["x"].astype(np.float64), self.c, self.max_levels)
+        g.split_median(pilot["x"].astype(np.float64), self.c, self.max_levels, pilot["n"])
         g.node_count[:] = 0.0
-        self._splat(pilot["x"], pilot["wi"], pilot["pdf"], pilot["radiance"])
+        self._splat(pilot["x"], pilot["n"], pilot["wi"], pilot["pdf"], pilot["radiance"])
 
     def _observe_data(self, rec):
         self.grid.splat_records(rec)
@@ -381,16 +395,14 @@ class PhotonGuide(HistogramGuide):
     def _initial_data(self, pilot):
         g = self.grid
         kept = []
-        self._trace(0, lambda node, b, v, x: kept.append((b.copy(), v.copy(), x.copy())))
+        self._trace(0, lambda node, b, v, x, n: kept.append((b.copy(), v.copy(), x.copy(), n.copy())))
         if not kept:
             return
-        bins = np.concatenate([k[0] for k in kept])
-        val = np.concatenate([k[1] for k in kept])
-        x = np.concatenate([k[2] for k in kept])
-        g.split_median(x, self.c, self.max_levels)
+        bins, val, x, n = (np.concatenate([k[j] for k in kept]) for j in range(4))
+        g.split_median(x, self.c, self.max_levels, n)
         g.node_count[:] = 0.0
-        g.accumulate(g.locate(x), bins, val)
+        g.accumulate(g.locate(x, n), bins, val)
 
     def _iterate_data(self):
         g = self.grid
-        self._trace(self.iteration, lambda node, b, v, x: g.accumulate(node, b, v))
+        self._trace(self.iteration, lambda node, b, v, x, n: g.accumulate(node, b, v))

@@ -88,7 +88,7 @@ def emit(lt, tri, centre, radius, eps, seed, iteration, g0, key, o, d, power, th
 @kernel
 def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type, mat_param, gs, data_slot,
             key, power, thr, depth, max_hits, rr_depth, eps, alive, next_o, next_d,
-            dep_node, dep_bin, dep_val, dep_x, first_hit):
+            dep_node, dep_bin, dep_val, dep_x, dep_n, first_hit):
     """One hit for every active photon: deposit, then sample the BSDF (importance mode) and roulette.
 
     Entry k of the hit arrays belongs to photon active[k]; writes its deposit (dep_node -1 for
@@ -110,12 +110,15 @@ def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type,
         delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
         pw = (power[i, 0] * thr[i, 0], power[i, 1] * thr[i, 1], power[i, 2] * thr[i, 2])
         if not delta and (first_hit or depth[i] > 0):
-            node = find_voxel(gs, x)
+            cw = dot(win, ng)
+            nf = ng if cw >= 0.0 else (-ng[0], -ng[1], -ng[2])  # the side the photon arrives on
+            node = find_voxel(gs, x, nf)
             if node >= 0 and data_slot[node] >= 0:
                 dep_node[k] = node
                 dep_bin[k] = direction_bin(win, gs.n_theta, gs.n_phi)
                 dep_val[k] = 0.2126 * pw[0] + 0.7152 * pw[1] + 0.0722 * pw[2]
                 dep_x[k, 0], dep_x[k, 1], dep_x[k, 2] = x
+                dep_n[k, 0], dep_n[k, 1], dep_n[k, 2] = nf
         dk = depth[i]
         if dk + 1 >= max_hits:
             continue
@@ -156,12 +159,14 @@ class PhotonBuffers:
         self.dep_bin = np.zeros(size, np.int64)
         self.dep_val = np.zeros(size)
         self.dep_x = z3()
+        self.dep_n = z3()
 
 
 def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 << 16, max_hits=None,
                   first_hit=True):
     """Trace `n_photons` photons of guide iteration `iteration`; after every bounce call
-    sink(node, bin, value, x) with that bounce's deposits (arrays of equal length); with
+    sink(node, bin, value, x, n) with that bounce's deposits (arrays of equal length; n is the
+    normal on the side the photon arrived on); with
     first_hit False, photons deposit from their second hit on (indirect light only).
     Returns (photons traced, deposits, rays)."""
     scene, accel, lt = ctx.scene, ctx.accel, ctx.lights
@@ -188,11 +193,12 @@ def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 <<
             scatter(active, d, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
                     scene.materials.type, scene.materials.param, gs, data_slot, buf.key, buf.power, buf.thr,
                     buf.depth, max_hits, ctx.rr_depth, ctx.eps, buf.alive[:m], buf.next_o[:m], buf.next_d[:m],
-                    buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m], first_hit)
+                    buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m], buf.dep_n[:m], first_hit)
             has = buf.dep_node[:m] >= 0
             if has.any():
                 deposits += int(has.sum())
-                sink(buf.dep_node[:m][has], buf.dep_bin[:m][has], buf.dep_val[:m][has], buf.dep_x[:m][has])
+                sink(buf.dep_node[:m][has], buf.dep_bin[:m][has], buf.dep_val[:m][has], buf.dep_x[:m][has],
+                     buf.dep_n[:m][has])
             keep = np.flatnonzero(buf.alive[:m])
             active = active[keep]
             o = buf.next_o[:m][keep]

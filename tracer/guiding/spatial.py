@@ -38,6 +38,7 @@ class GuideState(NamedTuple):
     wsum: np.ndarray  # (S,) float64 their totals
     n_theta: int
     n_phi: int
+    n_class: int  # trees per cell: 1, or 6 (one per facing-normal class, see normal_class)
 
 
 def empty_state(n_theta=2, n_phi=2):
@@ -45,12 +46,29 @@ def empty_state(n_theta=2, n_phi=2):
     return GuideState(np.zeros(3), np.ones(3), np.zeros(3, np.int64), np.full(1, -1, np.int32),
                       np.zeros(1, np.int32), np.zeros(1), np.full(1, -1, np.int32), np.ones(1),
                       np.zeros((1, n_theta * n_phi, 2), np.uint32), np.zeros((1, n_theta * n_phi), np.uint16),
-                      np.ones(1), int(n_theta), int(n_phi))
+                      np.ones(1), int(n_theta), int(n_phi), 1)
 
 
 @jit(inline="always")
-def find_voxel(gs, x):
-    """Leaf node holding point x, or -1 outside the grid (or without a grid)."""
+def normal_class(n_class, n):
+    """Class of a facing normal n (the side of the surface a path or photon arrives on): its
+    dominant axis and sign, 0..5 (0 when there is one class)."""
+    if n_class == 1:
+        return 0
+    ax = 0
+    m = abs(n[0])
+    if abs(n[1]) > m:
+        ax = 1
+        m = abs(n[1])
+    if abs(n[2]) > m:
+        ax = 2
+    return 2 * ax + (1 if n[ax] < 0.0 else 0)
+
+
+@jit(inline="always")
+def find_voxel(gs, x, n):
+    """Leaf node holding point x on a surface whose side facing the arriving path or photon has
+    normal n, or -1 outside the grid (or without a grid)."""
     if gs.res[0] == 0:
         return -1
     c0 = int(np.floor((x[0] - gs.lo[0]) * gs.inv_cell[0]))
@@ -58,7 +76,7 @@ def find_voxel(gs, x):
     c2 = int(np.floor((x[2] - gs.lo[2]) * gs.inv_cell[2]))
     if c0 < 0 or c1 < 0 or c2 < 0 or c0 >= gs.res[0] or c1 >= gs.res[1] or c2 >= gs.res[2]:
         return -1
-    node = (c2 * gs.res[1] + c1) * gs.res[0] + c0
+    node = ((c2 * gs.res[1] + c1) * gs.res[0] + c0) * gs.n_class + normal_class(gs.n_class, n)
     while gs.child[node] >= 0:  # bounded by the tree depth
         a = gs.axis[node]
         node = gs.child[node] + (1 if x[a] >= gs.split[node] else 0)
@@ -79,8 +97,9 @@ def voxel_pdf(gs, node, d):
 # --- The sampler contract of DESIGN.md: sample(state, x, n, wo, u), pdf(state, x, n, wi) -------
 @jit(inline="always")
 def guide_sample(gs, x, n, wo, u0, u1):
-    """Sample a world direction from the guide at x: (wi, pdf); pdf 0 where there is no map."""
-    node = find_voxel(gs, x)
+    """Sample a world direction from the guide at x, n (the normal on the side of wo): (wi, pdf);
+    pdf 0 where there is no map."""
+    node = find_voxel(gs, x, n)
     if node < 0 or gs.slot[node] < 0:
         return (0.0, 0.0, 1.0), 0.0
     return voxel_sample(gs, node, u0, u1)
@@ -88,7 +107,7 @@ def guide_sample(gs, x, n, wo, u0, u1):
 
 @jit(inline="always")
 def guide_pdf(gs, x, n, wi):
-    node = find_voxel(gs, x)
+    node = find_voxel(gs, x, n)
     if node < 0 or gs.slot[node] < 0:
         return 0.0
     return voxel_pdf(gs, node, wi)
@@ -119,12 +138,12 @@ def guide_pdf_batch(gs, x, n, wi):
 
 
 @kernel
-def locate_batch(gs, x):
-    """Leaf node of every point x (m, 3), -1 outside the grid."""
+def locate_batch(gs, x, n):
+    """Leaf node of every point x (m, 3) with facing normal n (m, 3), -1 outside the grid."""
     m = x.shape[0]
     out = np.empty(m, np.int64)
     for i in prange(m):
-        out[i] = find_voxel(gs, (x[i, 0], x[i, 1], x[i, 2]))
+        out[i] = find_voxel(gs, (x[i, 0], x[i, 1], x[i, 2]), (n[i, 0], n[i, 1], n[i, 2]))
     return out
 
 
@@ -185,7 +204,7 @@ def _splat_records(node, strategy, wi, pdf, radiance, n_theta, n_phi, data_slot,
 class HierarchicalGrid:
     """Uniform cells, each the root of a binary tree; data slots for the visited voxels."""
 
-    def __init__(self, lo, hi, resolution, n_theta, n_phi):
+    def __init__(self, lo, hi, resolution, n_theta, n_phi, n_class=1):
         lo = np.asarray(lo, dtype=np.float64)
         hi = np.asarray(hi, dtype=np.float64)
         ext = np.maximum(hi - lo, 1e-9)
@@ -197,7 +216,10 @@ class HierarchicalGrid:
         self.res = res
         self.n_theta, self.n_phi = int(n_theta), int(n_phi)
         self.K = self.n_theta * self.n_phi
-        self.n_cells = int(np.prod(res))
+        if n_class not in (1, 6):
+            raise ValueError(f"n_class must be 1 or 6, got {n_class!r}")
+        self.n_class = int(n_class)
+        self.n_cells = int(np.prod(res)) * self.n_class  # roots: (cell, normal class)
         self.n_nodes = self.n_cells
         cap = max(2 * self.n_cells, 64)
         self.child = np.full(cap, -1, np.int32)
@@ -206,7 +228,8 @@ class HierarchicalGrid:
         self.depth = np.zeros(cap, np.int32)
         self.box_lo = np.zeros((cap, 3))
         self.box_hi = np.zeros((cap, 3))
-        ijk = np.stack(np.unravel_index(np.arange(self.n_cells), tuple(res[::-1]))[::-1], axis=1)  # (x, y, z)
+        cell = np.arange(self.n_cells) // self.n_class
+        ijk = np.stack(np.unravel_index(cell, tuple(res[::-1]))[::-1], axis=1)  # (x, y, z)
         self.box_lo[: self.n_cells] = self.lo + ijk * side
         self.box_hi[: self.n_cells] = self.lo + (ijk + 1) * side
         self.node_count = np.zeros(cap)  # samples (photons or path vertices) binned, halved on a split
@@ -293,15 +316,21 @@ class HierarchicalGrid:
         m = max(self.n_slots, 1)
         return GuideState(self.lo.copy(), np.full(3, 1.0 / self.side), self.res.astype(np.int64),
                           self.child[:n], self.axis[:n], self.split[:n], slot, self.alpha[:n],
-                          self.table[:m], self.dens[:m], self.wsum[:m], self.n_theta, self.n_phi)
+                          self.table[:m], self.dens[:m], self.wsum[:m], self.n_theta, self.n_phi, self.n_class)
 
     def lookup_state(self):
         """A state for locating points only (no maps)."""
         s = self.state()
         return s._replace(slot=np.full(self.n_nodes, -1, np.int32))
 
-    def locate(self, x):
-        return locate_batch(self.lookup_state(), np.ascontiguousarray(x, dtype=np.float64))
+    def locate(self, x, n=None):
+        """Leaves of points x (m, 3) with facing normals n (m, 3; may be left out with one class)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        if n is None:
+            if self.n_class != 1:
+                raise ValueError("locate needs the facing normals when voxels are split by normal class")
+            n = np.zeros_like(x)
+        return locate_batch(self.lookup_state(), x, np.ascontiguousarray(n, dtype=np.float64))
 
     # --- visits, slots ------------------------------------------------------------------------
     def visit(self, nodes, iteration):
@@ -389,10 +418,11 @@ class HierarchicalGrid:
                         todo.append((j, lvl + 1))
         return n_split
 
-    def split_median(self, points, threshold, max_levels=3):
+    def split_median(self, points, threshold, max_levels=3, normals=None):
         """Initialisation phase: split leaves with slots that hold more than threshold of `points`
-        (m, 3) at the median point (middle plane where the median cannot separate them)."""
-        nodes = self.locate(points)
+        (m, 3, with their facing `normals`) at the median point (middle plane where the median
+        cannot separate them)."""
+        nodes = self.locate(points, normals)
         order = np.argsort(nodes, kind="stable")
         nodes_sorted = nodes[order]
         starts = np.searchsorted(nodes_sorted, np.arange(self.n_nodes + 1))
