@@ -149,3 +149,35 @@ def test_frozen_guide_renders_final_passes_only_and_stays_unbiased(bsdf_renders)
     assert_z(m_g, v_g + v_b, m_b, n_tests=3, what="frozen photon on cornell vs bsdf")
     with pytest.raises(SettingsError, match="has learned"):
         FrozenGuide(make_guide("photon"))
+
+
+def _guided_below_surface(scene, **settings):
+    """Fraction of the last training iteration's guided directions that left below the surface
+    (|f cos| = 0 at a diffuse vertex), for a photon guide with these settings."""
+    g = make_guide("photon", iterations=3, **settings)
+    seen = [0, 0]
+    observe = g.observe
+
+    def watch(rec):
+        if g.iteration == g.iterations:
+            guided = np.asarray(rec.strategy) == 1
+            seen[0] += int(guided.sum())
+            seen[1] += int((guided & (np.asarray(rec.fcos) <= 0.0)).sum())
+        observe(rec)
+
+    g.observe = watch
+    tracer.render(scene, spp=32, guide=g, seed=4)
+    assert seen[0] > 1000
+    return seen[1] / seen[0]
+
+
+def test_maps_per_side_keep_guided_directions_above_the_surface():
+    # In the Ajar room every voxel on the door wall holds both of its sides, and every corner
+    # voxel a floor and a wall: one map per voxel sends a good share of guided directions behind
+    # the surface. One map per side (photons and camera vertices keyed by the side they arrive
+    # on) must cut that share several times; were the photons' side the opposite of the camera
+    # paths', nearly every guided direction would go below the surface instead.
+    scene = _scene("ajar", 64, 48)
+    one = _guided_below_surface(scene, normal_classes=1)
+    six = _guided_below_surface(scene)
+    assert six < 0.05 and six < one / 3, (one, six)

@@ -91,18 +91,20 @@ def test_gaussian_keeps_mass_and_pullpush_fills_holes():
         make_reconstructor("median")
 
 
-def test_grid_lookup_matches_the_boxes_after_splits():
+@pytest.mark.parametrize("n_class", [1, 6])
+def test_grid_lookup_matches_the_boxes_after_splits(n_class):
     rng = np.random.default_rng(3)
-    g = HierarchicalGrid(np.zeros(3), np.array([4.0, 2.0, 3.0]), 6, 4, 8)
-    pts = rng.random((20_000, 3)) * [4.0, 2.0, 3.0]
-    g.visit(g.locate(pts), 0)
-    n_med = g.split_median(pts, threshold=300, max_levels=3)
+    g = HierarchicalGrid(np.zeros(3), np.array([4.0, 2.0, 3.0]), 6, 4, 8, n_class)
+    pts = rng.random((20_000 * n_class, 3)) * [4.0, 2.0, 3.0]  # as many per tree either way
+    nrm = rng.normal(size=pts.shape)
+    g.visit(g.locate(pts, nrm), 0)
+    n_med = g.split_median(pts, threshold=300, max_levels=3, normals=nrm)
     g.node_count[:] = 1e9  # everything over the threshold: mid-plane splits, 3 levels at most
     depth0 = g.depth[: g.n_nodes].copy()
     n_mid = g.split_mid(threshold=10, max_levels=3)
     assert n_med > 0 and n_mid > 0
     assert g.depth[: g.n_nodes].max() <= depth0.max() + 3
-    leaf = g.locate(pts)
+    leaf = g.locate(pts, nrm)
     assert (g.child[leaf] < 0).all()
     lo, hi = g.box_lo[leaf], g.box_hi[leaf]
     assert ((pts >= lo - 1e-12) & (pts <= hi + 1e-12)).all()
@@ -110,7 +112,20 @@ def test_grid_lookup_matches_the_boxes_after_splits():
     slots = g.data_slot[g.leaves()]
     used = slots[slots >= 0]
     assert used.size == np.unique(used).size and used.size > 0
-    assert g.locate(np.array([[-1.0, 0.5, 0.5], [2.0, 9.0, 1.0]])).tolist() == [-1, -1]
+    assert g.locate(np.array([[-1.0, 0.5, 0.5], [2.0, 9.0, 1.0]]), nrm[:2]).tolist() == [-1, -1]
+    # the tree a point descends is the one of its cell and of its normal's class (axis, sign)
+    root = leaf.copy()
+    parent = np.full(g.n_nodes, -1)
+    inner = np.flatnonzero(g.child[: g.n_nodes] >= 0)
+    parent[g.child[inner]] = inner
+    parent[g.child[inner] + 1] = inner
+    while (parent[root] >= 0).any():
+        root = np.where(parent[root] >= 0, parent[root], root)
+    ax = np.argmax(np.abs(nrm), axis=1)
+    cls = 2 * ax + (nrm[np.arange(len(ax)), ax] < 0) if n_class == 6 else 0
+    ijk = np.floor((pts - g.lo) / g.side).astype(int)
+    cell = (ijk[:, 2] * g.res[1] + ijk[:, 1]) * g.res[0] + ijk[:, 0]
+    assert (root == cell * n_class + cls).all()
 
 
 def test_grid_recycles_unvisited_voxels():

@@ -61,7 +61,9 @@ def warm_up_guides(ctx):
     rec = Records.allocate(1)
     grid.visit_records(rec, 0)
     grid.splat_records(rec)
-    from .histogram import _mis_stats
+    from .histogram import _mis_stats, _normalised, _row_sums
+
+    _normalised(grid.power, np.zeros(1, np.int64), _row_sums(grid.power, np.zeros(1, np.int64)) + 1.0)
     from .reconstruct import Gaussian
 
     Gaussian(1.0).reconstruct(np.zeros((1, 4, 4), np.float32), None, None)
