@@ -9,7 +9,9 @@ way. The figure is the relative variance of one sample, averaged over pixels:
 mean(var_of_mean x spp / (R^2 + 0.01)), R the scene's reference (box-downsampled by `--scale`),
 i.e. the relMSE one sample would have; the lower, the better the learned sampling. It isolates
 the maps from learning cost and scheduling, which bench.convergence measures. Heavy-tailed
-estimators show up as a large spread over seeds, so every seed's figure is printed.
+estimators show up as a large spread over seeds, so every seed's figure is printed. Beside it,
+the render time per spp (median over seeds) and the "efficiency" ratio to bsdf, relative variance
+x time per spp: the relMSE ratio the frozen maps would reach at equal time, learning not counted.
 """
 import argparse
 
@@ -33,7 +35,8 @@ def downsample(img, s):
 
 
 def measure(scene, ref, method, spp, seeds, train_spp):
-    """Per-seed relative variances of `method` on `scene` (frozen after training if a guide)."""
+    """Per-seed (relative variance, render seconds per spp) of `method` on `scene` (frozen after
+    training if a guide)."""
     name, settings = method_spec(method)
     guide = "bsdf"
     if name != "bsdf":
@@ -43,7 +46,7 @@ def measure(scene, ref, method, spp, seeds, train_spp):
     out = []
     for s in range(seeds):
         r = tracer.render(scene, spp=spp, guide=guide, seed=1000 + s)
-        out.append(relative_variance(r.film, ref, spp))
+        out.append((relative_variance(r.film, ref, spp), r.stats["time_total"] / spp))
     return out
 
 
@@ -66,19 +69,22 @@ def main(argv=None):
         make_guide(name, **settings)
     print(f"relative variance of one sample (mean over pixels of var / (R^2 + 0.01)); {a.spp} spp x "
           f"{a.seeds} seeds, guides trained at {a.train_spp} spp then frozen, 1/{a.scale} resolution")
-    print(f"{'scene':22s} {'method':28s} {'median':>9s} {'vs bsdf':>8s}  per seed")
+    print(f"{'scene':22s} {'method':28s} {'median':>9s} {'vs bsdf':>8s} {'s/spp':>7s} {'eff vs bsdf':>11s}  per seed")
     for given in [s.strip() for s in a.scenes.split(",") if s.strip()]:
         path = scene_path(given, a.scene_dir)
         ref = downsample(reference_for(path)[0], a.scale)
         scene = tracer.load_scene(path)
         scene = tracer.load_scene(path, width=scene.width // a.scale, height=scene.height // a.scale)
-        base = None
+        base = base_t = None
         for m in methods:
-            vals = measure(scene, ref, m, a.spp, a.seeds, a.train_spp)
-            med = float(np.median(vals))
-            base = med if m == "bsdf" else base
+            vals, secs = zip(*measure(scene, ref, m, a.spp, a.seeds, a.train_spp))
+            med, t = float(np.median(vals)), float(np.median(secs))
+            if m == "bsdf":
+                base, base_t = med, t
             ratio = f"{med / base:8.2f}" if base else " " * 8
-            print(f"{given:22s} {m:28s} {med:9.4g} {ratio}  " + " ".join(f"{v:.3g}" for v in vals), flush=True)
+            eff = f"{med * t / (base * base_t):11.2f}" if base else " " * 11
+            print(f"{given:22s} {m:28s} {med:9.4g} {ratio} {t:7.4f} {eff}  " + " ".join(f"{v:.3g}" for v in vals),
+                  flush=True)
     return 0
 
 

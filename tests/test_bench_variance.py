@@ -26,3 +26,5 @@ def test_variance_bench_runs_bsdf_and_a_frozen_guide(tmp_path, monkeypatch, caps
     rows = [line.split() for line in lines[head + 1:]]
     assert [r[1] for r in rows] == ["bsdf", "photon"]  # bsdf first, added when not asked for
     assert rows[0][3] == "1.00" and all(np.isfinite(float(r[2])) for r in rows)
+    # seconds per spp, and the equal-time ratio (relative variance x seconds per spp) to bsdf
+    assert rows[0][5] == "1.00" and all(float(r[4]) > 0 and np.isfinite(float(r[5])) for r in rows)

@@ -207,7 +207,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                 else:
                     last = passes[-1]
                     est = (last["time"] / last["spp"]) * n + 2.0 * last.get("time_update", 0.0)
-                    if _time.perf_counter() - t_start + 2.0 * est > time:
+                    elapsed = _time.perf_counter() - t_start
+                    if elapsed + 2.0 * est > time or elapsed + est > getattr(g, "train_budget", 1.0) * time:
                         break
                 films.append((Film(crop[2], crop[3]), "train"))
                 run_pass(films[-1][0], n, "train", True)

@@ -185,8 +185,10 @@ def _visit_records(node, strategy, iteration, last_visit, data_slot, missing):
 
 
 @jit
-def _splat_records(node, strategy, wi, pdf, radiance, n_theta, n_phi, data_slot, power, count, node_count):
-    """radiance / pdf of every record into its leaf's histogram, in the bin of its direction."""
+def _splat_records(node, strategy, wi, n, pdf, radiance, n_theta, n_phi, data_slot, power, count, node_count):
+    """radiance |cos| / pdf of every record into its leaf's histogram, in the bin of its direction
+    (cos to the record's facing normal n: the map learns incident radiance times the cosine, the
+    part of the integrand a diffuse vertex shares with the map, as photon maps do)."""
     for i in range(node.shape[0]):
         nd = node[i]
         if strategy[i] < 0 or nd < 0:
@@ -196,7 +198,8 @@ def _splat_records(node, strategy, wi, pdf, radiance, n_theta, n_phi, data_slot,
             continue
         b = direction_bin((float(wi[i, 0]), float(wi[i, 1]), float(wi[i, 2])), n_theta, n_phi)
         p = float(pdf[i])
-        power[s, b] += radiance[i] / p if p > 0.0 else 0.0
+        c = abs(float(wi[i, 0]) * n[i, 0] + float(wi[i, 1]) * n[i, 1] + float(wi[i, 2]) * n[i, 2])
+        power[s, b] += radiance[i] * c / p if p > 0.0 else 0.0
         count[s, b] += 1.0
         node_count[nd] += 1.0
 
@@ -354,8 +357,8 @@ class HierarchicalGrid:
         self.map_ok[self.slot_node[slots]] = tabs.usable
 
     def splat_records(self, rec):
-        """Each record's radiance / pdf into its leaf's histogram (the `grid` guide's data)."""
-        _splat_records(rec.node, rec.strategy, rec.wi, rec.pdf, rec.radiance, self.n_theta, self.n_phi,
+        """Each record's radiance |cos| / pdf into its leaf's histogram (the `grid` guide's data)."""
+        _splat_records(rec.node, rec.strategy, rec.wi, rec.n, rec.pdf, rec.radiance, self.n_theta, self.n_phi,
                        self.data_slot, self.power, self.count, self.node_count)
 
     def recycle(self, iteration, after=2):
