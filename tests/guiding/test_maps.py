@@ -39,25 +39,32 @@ def test_fast_bins_are_the_atan2_bins():
     np.testing.assert_array_equal(bin_of_batch(d, H, W), row * W + col)
 
 
-def test_alias_table_realises_the_map():
+def test_sampling_table_realises_the_map():
     rng = np.random.default_rng(1)
     maps = rng.random((5, H, W)) ** 4
     maps[1, :, :5] = 0.0
     maps[2] = 0.0
     maps[3, 2, 3] = 1e6  # one dominant bin
+    maps[4, 3] = 0.0  # an empty row
     tabs = build_tables(maps)
     prob = probabilities(tabs)
     usable = tabs.usable
     assert list(usable) == [True, True, False, True, True]
-    # the table realises w / W exactly: each bin's share of the K entries, counted in integers
-    K = H * W
-    q = tabs.table[:, :, 0].astype(np.int64)
-    alias = tabs.table[:, :, 1].astype(np.int64)
+    # the sampler realises w / W exactly: bin k owns the integers [C_k, C_k + w_k) of [0, W), C the
+    # weights before it; a u0 at the first and at the last integer of every bin lands in that bin
     for s in np.flatnonzero(usable):
+        w = tabs.dens[s].astype(np.int64)
         Wt = int(tabs.wsum[s])
-        assert Wt == int(tabs.dens[s].astype(np.int64).sum()) and (q[s] <= Wt).all()
-        share = np.bincount(np.arange(K), weights=q[s], minlength=K) + np.bincount(alias[s], weights=Wt - q[s], minlength=K)
-        np.testing.assert_array_equal(share, tabs.dens[s].astype(np.int64) * K)
+        assert Wt == int(w.sum())
+        np.testing.assert_array_equal(tabs.rowcum[s], np.concatenate([[0], np.cumsum(w.reshape(H, W).sum(1))]))
+        C = np.concatenate([[0], np.cumsum(w)[:-1]])
+        k = np.flatnonzero(w > 0)
+        for first in (True, False):
+            j = C[k] if first else C[k] + w[k] - 1
+            u = np.stack([(j + 0.5) / Wt, np.full(k.size, 0.5)], axis=1)
+            d, p = map_sample_batch(tabs, s, H, W, u)
+            np.testing.assert_array_equal(bin_of_batch(d, H, W), k)
+            np.testing.assert_allclose(p, w[k] / Wt * H * W / (4 * np.pi), rtol=1e-12)
     # quantised to 16 bits of the largest bin
     target = maps.reshape(5, -1) / np.maximum(maps.reshape(5, -1).sum(axis=1, keepdims=True), 1e-300)
     err = np.abs(prob - target)[usable]

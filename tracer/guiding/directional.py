@@ -5,17 +5,21 @@ phi = atan2(y, x), both uniform, so every bin covers the same solid angle 4 pi /
 (the cylindrical projection preserves area). Bin k = row * n_phi + col.
 
 A map is stored quantised: integer weights w (uint16, the largest bin 65535) with their total W,
-so that bin k has probability exactly w_k / W and density w_k K / (4 pi W). Sampling goes through
-an alias table (Walker, built by Vose's method in integer arithmetic, so that it realises those
-probabilities exactly): u0 picks an entry k and, with the entry's integer threshold q_k in [0, W],
-the entry's bin or its alias; u1 and what is left of u0 place the direction uniformly in solid
-angle inside the bin. Sampling is O(1).
+so that bin k has probability exactly w_k / W and density w_k K / (4 pi W). Besides the weights a
+map keeps only the cumulative sums of its rows (n_theta + 1 uint32). Sampling draws an integer j
+uniform in [0, W) from u0, finds its row by binary search in the row sums and its bin by a scan
+of that row's weights (bin k owns the integers [C_k, C_k + w_k), C_k the sum of the weights
+before it): exactly w_k / W. What is left of u0 and u1 place the direction uniformly in solid
+angle inside the bin.
 
-The layout is for the cost of a density lookup, which every guided vertex pays twice (NEE's MIS
-weight and the BSDF-sampled direction's mixture pdf): the weights of a 64 x 32 map take 4 KiB, so
-with hundreds of voxels the lookups stay in cache (16-byte float records per bin were 8 times
-larger and made a guided pass 40% slower on Cornell). Bins below half a quantum of the largest one
-get weight 0; keeping every direction with light reachable is the BSDF's part of the mixture.
+The layout is for the memory a guided vertex touches. A sample reads the row sums and one row
+(128 bytes of a 64 x 32 map), a density lookup one weight, which every guided vertex pays twice
+(NEE's MIS weight and the BSDF-sampled direction's mixture pdf); a map is 4.1 KiB in all, so
+hundreds of them stay in the cache. (An alias table, O(1) but 16 KiB a map beside the weights,
+made a guided pass on Cornell 70% slower in shading than the same paths with every voxel
+sharing one map's memory: cache misses, not arithmetic.) Bins below half a quantum of the
+largest one get weight 0; keeping every direction with light reachable is the BSDF's part of the
+mixture.
 """
 import math
 from typing import NamedTuple
@@ -73,40 +77,66 @@ def direction_bin(d, n_theta, n_phi):
 @jit(inline="always")
 def bin_direction(k, n_theta, n_phi, s, t):
     """Direction at fractional position (s, t) in [0,1)^2 inside bin k (s along z, t along phi)."""
-    row = k // n_phi
+    # k // n_phi without an integer division (k + 0.5 is far from a multiple of n_phi for k < 2^16)
+    row = int((k + 0.5) * (1.0 / n_phi))
     col = k - row * n_phi
     # kept 1e-9 of a bin away from its edges, so that rounding never moves the direction
     # into the neighbouring bin (direction_bin(bin_direction(k, ...)) == k always)
     s = min(max(s, 1e-9), 1.0 - 1e-9)
     t = min(max(t, 1e-9), 1.0 - 1e-9)
-    z = -1.0 + 2.0 * (row + s) / n_theta
+    z = -1.0 + (row + s) * (2.0 / n_theta)
     z = min(max(z, -1.0), 1.0)
-    phi = -math.pi + 2.0 * math.pi * (col + t) / n_phi
+    phi = -math.pi + (col + t) * (2.0 * math.pi / n_phi)
     r = math.sqrt(max(0.0, 1.0 - z * z))
     return (r * math.cos(phi), r * math.sin(phi), z)
 
 
 @jit(inline="always")
-def map_sample(table, dens, wsum, slot, n_theta, n_phi, u0, u1):
+def map_sample(rowcum, dens, wsum, slot, n_theta, n_phi, u0, u1):
     """Sample a direction from map `slot`: u0 picks the bin (and is reused inside it), u1 the
     position along phi. Returns (direction, pdf per unit solid angle); pdf 0 on failure."""
-    K = n_theta * n_phi
     total = wsum[slot]
-    x = u0 * K
-    k = min(int(x), K - 1)
-    y = min(max(x - k, 0.0), 1.0) * total
-    qk = float(table[slot, k, 0])
-    if y < qk:
-        b = k
-        s = y / qk
-    else:
-        b = int(table[slot, k, 1])
-        s = (y - qk) / (total - qk) if qk < total else 0.5
-    w = float(dens[slot, b])
-    if not (w > 0.0):
+    if not (total > 0.0):
         return (0.0, 0.0, 1.0), 0.0
-    d = bin_direction(b, n_theta, n_phi, s, u1)
-    return d, w * K / (FOUR_PI * total)
+    y = u0 * total
+    j = min(np.int64(y), np.int64(total) - 1)  # uniform integer in [0, W)
+    frac = min(max(y - j, 0.0), 1.0)
+    # the row: rowcum[r] <= j < rowcum[r + 1] (binary search; rowcum[0] = 0, rowcum[n_theta] = W)
+    lo = 0
+    hi = n_theta
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if np.int64(rowcum[slot, mid]) <= j:
+            lo = mid
+        else:
+            hi = mid
+    r0 = np.int64(rowcum[slot, lo])
+    r1 = np.int64(rowcum[slot, lo + 1])
+    # the bin inside the row: the one whose integers [acc, acc + w) hold j, scanned from the
+    # nearer end of the row
+    base = lo * n_phi
+    if 2 * (j - r0) < r1 - r0:
+        c = 0
+        w = np.int64(dens[slot, base])
+        acc = r0
+        while c < n_phi - 1 and j >= acc + w:
+            acc += w
+            c += 1
+            w = np.int64(dens[slot, base + c])
+    else:
+        c = n_phi - 1
+        w = np.int64(dens[slot, base + c])
+        acc = r1 - w
+        while c > 0 and j < acc:
+            c -= 1
+            w = np.int64(dens[slot, base + c])
+            acc -= w
+    if not (w > 0 and acc <= j < acc + w):
+        return (0.0, 0.0, 1.0), 0.0
+    s = (float(j - acc) + frac) / float(w)
+    d = bin_direction(base + c, n_theta, n_phi, s, u1)
+    K = n_theta * n_phi
+    return d, float(w) * K / (FOUR_PI * total)
 
 
 @jit(inline="always")
@@ -144,52 +174,23 @@ def _quantise(m, dens, wsum, usable):
 
 
 @kernel
-def _build_alias(dens, wsum, table):
-    """Alias tables (Vose, exact in integers) of the weights dens (S, K) with totals wsum: entry k
-    keeps its own bin when y < table[k, 0] (y uniform in [0, W)), else goes to table[k, 1]."""
+def _row_sums(dens, n_theta, rowcum):
+    """Cumulative row sums of the weights dens (S, n_theta * n_phi): rowcum (S, n_theta + 1)."""
     S, K = dens.shape
+    n_phi = K // n_theta
     for s in prange(S):
-        W = np.int64(wsum[s])
-        for k in range(K):
-            table[s, k, 0] = 0
-            table[s, k, 1] = k
-        if W <= 0:
-            continue
-        scaled = np.empty(K, np.int64)  # w_k K, against the full entry W
-        small = np.empty(K, np.int64)
-        large = np.empty(K, np.int64)
-        ns = 0
-        nl = 0
-        for k in range(K):
-            scaled[k] = np.int64(dens[s, k]) * K
-            if scaled[k] < W:
-                small[ns] = k
-                ns += 1
-            else:
-                large[nl] = k
-                nl += 1
-        while ns > 0 and nl > 0:
-            ns -= 1
-            lo = small[ns]
-            g = large[nl - 1]
-            table[s, lo, 0] = scaled[lo]
-            table[s, lo, 1] = g
-            scaled[g] -= W - scaled[lo]
-            if scaled[g] < W:
-                nl -= 1
-                small[ns] = g
-                ns += 1
-        # integer arithmetic leaves every remaining entry exactly full
-        for j in range(nl):
-            table[s, large[j], 0] = W
-        for j in range(ns):
-            table[s, small[j], 0] = W
+        acc = 0
+        rowcum[s, 0] = 0
+        for r in range(n_theta):
+            for c in range(n_phi):
+                acc += dens[s, r * n_phi + c]
+            rowcum[s, r + 1] = acc
 
 
 class MapTables(NamedTuple):
-    """Sampling tables of S maps of K bins."""
+    """Sampling tables of S maps of K = n_theta x n_phi bins."""
 
-    table: np.ndarray  # (S, K, 2) uint32: (threshold q in [0, W], alias bin)
+    rowcum: np.ndarray  # (S, n_theta + 1) uint32: cumulative sums of the rows' weights (0 ... W)
     dens: np.ndarray  # (S, K) uint16 integer weights w
     wsum: np.ndarray  # (S,) float64 their total W (an integer)
     usable: np.ndarray  # (S,) bool: W > 0
@@ -208,10 +209,12 @@ def build_tables(maps):
     K = m.shape[1]
     if K > 1 << 16:
         raise ValueError("maps of more than 2^16 bins cannot keep their weights' total in uint32")
-    out = MapTables(np.zeros((s, K, 2), np.uint32), np.zeros((s, K), np.uint16), np.zeros(s), np.zeros(s, np.bool_))
+    n_theta = maps.shape[1]
+    out = MapTables(np.zeros((s, n_theta + 1), np.uint32), np.zeros((s, K), np.uint16), np.zeros(s),
+                    np.zeros(s, np.bool_))
     if s:
         _quantise(m, out.dens, out.wsum, out.usable)
-        _build_alias(out.dens, out.wsum, out.table)
+        _row_sums(out.dens, n_theta, out.rowcum)
     return out
 
 
@@ -222,7 +225,7 @@ def map_sample_batch(tables, slot, n_theta, n_phi, u):
     d = np.empty((n, 3))
     p = np.empty(n)
     for i in prange(n):
-        w, pdf = map_sample(tables.table, tables.dens, tables.wsum, slot, n_theta, n_phi, u[i, 0], u[i, 1])
+        w, pdf = map_sample(tables.rowcum, tables.dens, tables.wsum, slot, n_theta, n_phi, u[i, 0], u[i, 1])
         d[i, 0], d[i, 1], d[i, 2] = w
         p[i] = pdf
     return d, p

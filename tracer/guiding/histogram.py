@@ -10,7 +10,7 @@ Both follow Algorithm 1 of Zhu et al. 2021 (Photon-Driven Neural Reconstruction 
   make the voxels they visit valid and feed each voxel's mixing weight (eq. 14). Then the data of
   the iteration is binned into the valid voxels, voxels holding more than c sqrt(2^t) samples are
   split at the middle plane (at most 3 new levels), and every valid voxel's map is reconstructed
-  (normalise, then the `reconstruct` filter) and turned into an alias table.
+  (normalise, then the `reconstruct` filter) and turned into a sampling table.
 - `photon`: 2^t N_p photons per iteration (N_p = `photons_per_pixel` x pixels), their power
   binned by arrival direction (eq. 10); power maps accumulate over the iterations.
 - `grid`: each camera vertex adds radiance |cos| / pdf along its sampled direction, cos to its

@@ -5,7 +5,7 @@ reach; every cell is the root of a small binary tree whose leaves are the voxels
 live in flat arrays (node i of cell c is c itself for the roots; children are appended in
 pairs, the right one right after the left one), so a lookup is O(1) for the cell plus a short
 descent. A voxel holds a data slot (its histogram: power and counts per direction bin) only
-while camera paths visit it, and a sampling map (an alias table, see `directional`) once its data
+while camera paths visit it, and a sampling map (weights and row sums, see `directional`) once its data
 is reconstructed. Slots are recycled when a voxel goes unvisited for two iterations.
 
 Splits alternate x, y, z with the depth below the cell. `split_median` splits at the median of
@@ -33,7 +33,7 @@ class GuideState(NamedTuple):
     split: np.ndarray  # (N,) float64 split plane (x[axis] >= split goes right)
     slot: np.ndarray  # (N,) int32 sampling map of a leaf, -1 where it has none
     alpha: np.ndarray  # (N,) float64 probability of BSDF sampling at a leaf with a map
-    table: np.ndarray  # (S, K, 2) uint32 alias tables of the maps (see directional)
+    rowcum: np.ndarray  # (S, n_theta + 1) uint32 cumulative row sums of the maps' weights (see directional)
     dens: np.ndarray  # (S, K) uint16 integer weights of the maps' bins
     wsum: np.ndarray  # (S,) float64 their totals
     n_theta: int
@@ -45,7 +45,7 @@ def empty_state(n_theta=2, n_phi=2):
     """A state with no grid: every lookup misses, so every vertex samples its BSDF."""
     return GuideState(np.zeros(3), np.ones(3), np.zeros(3, np.int64), np.full(1, -1, np.int32),
                       np.zeros(1, np.int32), np.zeros(1), np.full(1, -1, np.int32), np.ones(1),
-                      np.zeros((1, n_theta * n_phi, 2), np.uint32), np.zeros((1, n_theta * n_phi), np.uint16),
+                      np.zeros((1, n_theta + 1), np.uint32), np.zeros((1, n_theta * n_phi), np.uint16),
                       np.ones(1), int(n_theta), int(n_phi), 1)
 
 
@@ -86,7 +86,7 @@ def find_voxel(gs, x, n):
 @jit(inline="always")
 def voxel_sample(gs, node, u0, u1):
     """(direction, pdf) from the map of leaf `node` (which must have one)."""
-    return map_sample(gs.table, gs.dens, gs.wsum, gs.slot[node], gs.n_theta, gs.n_phi, u0, u1)
+    return map_sample(gs.rowcum, gs.dens, gs.wsum, gs.slot[node], gs.n_theta, gs.n_phi, u0, u1)
 
 
 @jit(inline="always")
@@ -246,7 +246,7 @@ class HierarchicalGrid:
         self.power = np.zeros((scap, self.K), np.float32)
         self.count = np.zeros((scap, self.K), np.float32)
         self.prev = np.zeros((scap, self.K), np.float32)  # the previous iteration's normalised map
-        self.table = np.zeros((scap, self.K, 2), np.uint32)
+        self.rowcum = np.zeros((scap, self.n_theta + 1), np.uint32)
         self.dens = np.zeros((scap, self.K), np.uint16)
         self.wsum = np.ones(scap)
         self.slot_node = np.full(scap, -1, np.int64)
@@ -275,7 +275,7 @@ class HierarchicalGrid:
             self.n_slots += 1
             cap = self.power.shape[0]
             if self.n_slots > cap:
-                for name in ("power", "count", "prev", "table", "dens", "wsum", "slot_node"):
+                for name in ("power", "count", "prev", "rowcum", "dens", "wsum", "slot_node"):
                     a = getattr(self, name)
                     b = np.zeros((2 * cap,) + a.shape[1:], a.dtype) if name != "slot_node" else np.full(2 * cap, -1, a.dtype)
                     b[:cap] = a
@@ -283,7 +283,7 @@ class HierarchicalGrid:
         self.power[s] = 0.0
         self.count[s] = 0.0
         self.prev[s] = 0.0
-        self.table[s] = 0
+        self.rowcum[s] = 0
         self.dens[s] = 0
         self.wsum[s] = 1.0
         self.slot_node[s] = node
@@ -309,7 +309,7 @@ class HierarchicalGrid:
     def memory_bytes(self):
         arrays = (self.child, self.axis, self.split, self.depth, self.box_lo, self.box_hi, self.node_count,
                   self.last_visit, self.alpha, self.mis_sum, self.mis_n, self.data_slot, self.map_ok,
-                  self.power, self.count, self.prev, self.table, self.dens, self.wsum, self.slot_node)
+                  self.power, self.count, self.prev, self.rowcum, self.dens, self.wsum, self.slot_node)
         return int(sum(a.nbytes for a in arrays))
 
     # --- what the kernels read ---------------------------------------------------------------
@@ -319,7 +319,7 @@ class HierarchicalGrid:
         m = max(self.n_slots, 1)
         return GuideState(self.lo.copy(), np.full(3, 1.0 / self.side), self.res.astype(np.int64),
                           self.child[:n], self.axis[:n], self.split[:n], slot, self.alpha[:n],
-                          self.table[:m], self.dens[:m], self.wsum[:m], self.n_theta, self.n_phi, self.n_class)
+                          self.rowcum[:m], self.dens[:m], self.wsum[:m], self.n_theta, self.n_phi, self.n_class)
 
     def lookup_state(self):
         """A state for locating points only (no maps)."""
@@ -353,7 +353,7 @@ class HierarchicalGrid:
 
     def set_maps(self, slots, tabs):
         """The sampling tables (directional.MapTables) of the maps in these data slots."""
-        self.table[slots], self.dens[slots], self.wsum[slots] = tabs.table, tabs.dens, tabs.wsum
+        self.rowcum[slots], self.dens[slots], self.wsum[slots] = tabs.rowcum, tabs.dens, tabs.wsum
         self.map_ok[self.slot_node[slots]] = tabs.usable
 
     def splat_records(self, rec):
@@ -399,7 +399,7 @@ class HierarchicalGrid:
             self.slot_node[s] = c
             self.map_ok[c] = self.map_ok[node]
             s2 = self._new_slot(c + 1)
-            for name in ("power", "count", "prev", "table", "dens", "wsum"):
+            for name in ("power", "count", "prev", "rowcum", "dens", "wsum"):
                 getattr(self, name)[s2] = getattr(self, name)[s]
             self.map_ok[c + 1] = self.map_ok[node]
             self.map_ok[node] = False
