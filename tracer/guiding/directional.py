@@ -92,7 +92,7 @@ def bin_direction(k, n_theta, n_phi, s, t):
 
 
 @jit(inline="always")
-def map_sample(rowcum, dens, wsum, slot, n_theta, n_phi, u0, u1):
+def map_sample(rowcum, dens, wsum, pscale, slot, n_theta, n_phi, u0, u1):
     """Sample a direction from map `slot`: u0 picks the bin (and is reused inside it), u1 the
     position along phi. Returns (direction, pdf per unit solid angle); pdf 0 on failure."""
     total = wsum[slot]
@@ -135,23 +135,22 @@ def map_sample(rowcum, dens, wsum, slot, n_theta, n_phi, u0, u1):
         return (0.0, 0.0, 1.0), 0.0
     s = (float(j - acc) + frac) / float(w)
     d = bin_direction(base + c, n_theta, n_phi, s, u1)
-    K = n_theta * n_phi
-    return d, float(w) * K / (FOUR_PI * total)
+    return d, float(w) * pscale[slot]
 
 
 @jit(inline="always")
-def map_pdf(dens, wsum, slot, n_theta, n_phi, d):
-    """Density per unit solid angle with which `map_sample` produces direction d."""
-    K = n_theta * n_phi
-    w = float(dens[slot, direction_bin(d, n_theta, n_phi)])
-    return w * K / (FOUR_PI * wsum[slot]) if w > 0.0 else 0.0
+def map_pdf(dens, pscale, slot, n_theta, n_phi, d):
+    """Density per unit solid angle with which `map_sample` produces direction d: the bin's weight
+    times pscale = K / (4 pi W) (a multiplication: this lookup is on every guided vertex's
+    critical path, where a division cost more than the rest of it)."""
+    return float(dens[slot, direction_bin(d, n_theta, n_phi)]) * pscale[slot]
 
 
 WMAX = 65535  # the largest bin's weight
 
 
 @kernel
-def _quantise(m, dens, wsum, usable):
+def _quantise(m, dens, wsum, pscale, usable):
     """Integer weights of the rows of m (S, K): round(65535 v / max), 0 where v is not finite and
     positive; wsum their total, usable False where it is 0."""
     S, K = m.shape
@@ -170,6 +169,7 @@ def _quantise(m, dens, wsum, usable):
             dens[s, k] = w
             total += w
         wsum[s] = total
+        pscale[s] = K / (FOUR_PI * total) if total > 0 else 0.0
         usable[s] = total > 0
 
 
@@ -193,6 +193,7 @@ class MapTables(NamedTuple):
     rowcum: np.ndarray  # (S, n_theta + 1) uint32: cumulative sums of the rows' weights (0 ... W)
     dens: np.ndarray  # (S, K) uint16 integer weights w
     wsum: np.ndarray  # (S,) float64 their total W (an integer)
+    pscale: np.ndarray  # (S,) float64 K / (4 pi W): a bin's density per unit of weight (0 if W = 0)
     usable: np.ndarray  # (S,) bool: W > 0
 
 
@@ -210,10 +211,10 @@ def build_tables(maps):
     if K > 1 << 16:
         raise ValueError("maps of more than 2^16 bins cannot keep their weights' total in uint32")
     n_theta = maps.shape[1]
-    out = MapTables(np.zeros((s, n_theta + 1), np.uint32), np.zeros((s, K), np.uint16), np.zeros(s),
+    out = MapTables(np.zeros((s, n_theta + 1), np.uint32), np.zeros((s, K), np.uint16), np.zeros(s), np.zeros(s),
                     np.zeros(s, np.bool_))
     if s:
-        _quantise(m, out.dens, out.wsum, out.usable)
+        _quantise(m, out.dens, out.wsum, out.pscale, out.usable)
         _row_sums(out.dens, n_theta, out.rowcum)
     return out
 
@@ -225,7 +226,7 @@ def map_sample_batch(tables, slot, n_theta, n_phi, u):
     d = np.empty((n, 3))
     p = np.empty(n)
     for i in prange(n):
-        w, pdf = map_sample(tables.rowcum, tables.dens, tables.wsum, slot, n_theta, n_phi, u[i, 0], u[i, 1])
+        w, pdf = map_sample(tables.rowcum, tables.dens, tables.wsum, tables.pscale, slot, n_theta, n_phi, u[i, 0], u[i, 1])
         d[i, 0], d[i, 1], d[i, 2] = w
         p[i] = pdf
     return d, p
@@ -237,7 +238,7 @@ def map_pdf_batch(tables, slot, n_theta, n_phi, d):
     n = d.shape[0]
     p = np.empty(n)
     for i in prange(n):
-        p[i] = map_pdf(tables.dens, tables.wsum, slot, n_theta, n_phi, (d[i, 0], d[i, 1], d[i, 2]))
+        p[i] = map_pdf(tables.dens, tables.pscale, slot, n_theta, n_phi, (d[i, 0], d[i, 1], d[i, 2]))
     return p
 
 

@@ -36,6 +36,7 @@ class GuideState(NamedTuple):
     rowcum: np.ndarray  # (S, n_theta + 1) uint32 cumulative row sums of the maps' weights (see directional)
     dens: np.ndarray  # (S, K) uint16 integer weights of the maps' bins
     wsum: np.ndarray  # (S,) float64 their totals
+    pscale: np.ndarray  # (S,) float64 density per unit weight of each map, K / (4 pi total)
     n_theta: int
     n_phi: int
     n_class: int  # trees per cell: 1, or 6 (one per facing-normal class, see normal_class)
@@ -46,7 +47,7 @@ def empty_state(n_theta=2, n_phi=2):
     return GuideState(np.zeros(3), np.ones(3), np.zeros(3, np.int64), np.full(1, -1, np.int32),
                       np.zeros(1, np.int32), np.zeros(1), np.full(1, -1, np.int32), np.ones(1),
                       np.zeros((1, n_theta + 1), np.uint32), np.zeros((1, n_theta * n_phi), np.uint16),
-                      np.ones(1), int(n_theta), int(n_phi), 1)
+                      np.ones(1), np.zeros(1), int(n_theta), int(n_phi), 1)
 
 
 @jit(inline="always")
@@ -86,12 +87,12 @@ def find_voxel(gs, x, n):
 @jit(inline="always")
 def voxel_sample(gs, node, u0, u1):
     """(direction, pdf) from the map of leaf `node` (which must have one)."""
-    return map_sample(gs.rowcum, gs.dens, gs.wsum, gs.slot[node], gs.n_theta, gs.n_phi, u0, u1)
+    return map_sample(gs.rowcum, gs.dens, gs.wsum, gs.pscale, gs.slot[node], gs.n_theta, gs.n_phi, u0, u1)
 
 
 @jit(inline="always")
 def voxel_pdf(gs, node, d):
-    return map_pdf(gs.dens, gs.wsum, gs.slot[node], gs.n_theta, gs.n_phi, d)
+    return map_pdf(gs.dens, gs.pscale, gs.slot[node], gs.n_theta, gs.n_phi, d)
 
 
 # --- The sampler contract of DESIGN.md: sample(state, x, n, wo, u), pdf(state, x, n, wi) -------
@@ -249,6 +250,7 @@ class HierarchicalGrid:
         self.rowcum = np.zeros((scap, self.n_theta + 1), np.uint32)
         self.dens = np.zeros((scap, self.K), np.uint16)
         self.wsum = np.ones(scap)
+        self.pscale = np.zeros(scap)
         self.slot_node = np.full(scap, -1, np.int64)
         self.free = []
         self.n_slots = 0
@@ -275,7 +277,7 @@ class HierarchicalGrid:
             self.n_slots += 1
             cap = self.power.shape[0]
             if self.n_slots > cap:
-                for name in ("power", "count", "prev", "rowcum", "dens", "wsum", "slot_node"):
+                for name in ("power", "count", "prev", "rowcum", "dens", "wsum", "pscale", "slot_node"):
                     a = getattr(self, name)
                     b = np.zeros((2 * cap,) + a.shape[1:], a.dtype) if name != "slot_node" else np.full(2 * cap, -1, a.dtype)
                     b[:cap] = a
@@ -286,6 +288,7 @@ class HierarchicalGrid:
         self.rowcum[s] = 0
         self.dens[s] = 0
         self.wsum[s] = 1.0
+        self.pscale[s] = 0.0
         self.slot_node[s] = node
         self.data_slot[node] = s
         self.map_ok[node] = False
@@ -309,7 +312,7 @@ class HierarchicalGrid:
     def memory_bytes(self):
         arrays = (self.child, self.axis, self.split, self.depth, self.box_lo, self.box_hi, self.node_count,
                   self.last_visit, self.alpha, self.mis_sum, self.mis_n, self.data_slot, self.map_ok,
-                  self.power, self.count, self.prev, self.rowcum, self.dens, self.wsum, self.slot_node)
+                  self.power, self.count, self.prev, self.rowcum, self.dens, self.wsum, self.pscale, self.slot_node)
         return int(sum(a.nbytes for a in arrays))
 
     # --- what the kernels read ---------------------------------------------------------------
@@ -319,7 +322,7 @@ class HierarchicalGrid:
         m = max(self.n_slots, 1)
         return GuideState(self.lo.copy(), np.full(3, 1.0 / self.side), self.res.astype(np.int64),
                           self.child[:n], self.axis[:n], self.split[:n], slot, self.alpha[:n],
-                          self.rowcum[:m], self.dens[:m], self.wsum[:m], self.n_theta, self.n_phi, self.n_class)
+                          self.rowcum[:m], self.dens[:m], self.wsum[:m], self.pscale[:m], self.n_theta, self.n_phi, self.n_class)
 
     def lookup_state(self):
         """A state for locating points only (no maps)."""
@@ -354,6 +357,7 @@ class HierarchicalGrid:
     def set_maps(self, slots, tabs):
         """The sampling tables (directional.MapTables) of the maps in these data slots."""
         self.rowcum[slots], self.dens[slots], self.wsum[slots] = tabs.rowcum, tabs.dens, tabs.wsum
+        self.pscale[slots] = tabs.pscale
         self.map_ok[self.slot_node[slots]] = tabs.usable
 
     def splat_records(self, rec):
@@ -399,7 +403,7 @@ class HierarchicalGrid:
             self.slot_node[s] = c
             self.map_ok[c] = self.map_ok[node]
             s2 = self._new_slot(c + 1)
-            for name in ("power", "count", "prev", "rowcum", "dens", "wsum"):
+            for name in ("power", "count", "prev", "rowcum", "dens", "wsum", "pscale"):
                 getattr(self, name)[s2] = getattr(self, name)[s]
             self.map_ok[c + 1] = self.map_ok[node]
             self.map_ok[node] = False
