@@ -213,9 +213,11 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wi, True)
             pbs = bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wi)
             pdf = a * pbs + (1.0 - a) * pg
-            wt = (f[0] / pdf, f[1] / pdf, f[2] / pdf) if pdf > 0.0 else (0.0, 0.0, 0.0)
+            wt = (0.0, 0.0, 0.0)
             if pdf > 0.0:
-                gn *= pbs / pdf
+                inv = 1.0 / pdf
+                wt = (f[0] * inv, f[1] * inv, f[2] * inv)
+                gn *= pbs * inv
             dlt = False
         else:
             wi, wt, pdf, dlt = bsdfs.bsdf_sample(mat_type, mat_param, m, wo, u0, u1,
@@ -224,8 +226,9 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             pbs = pdf
             if a < 1.0 and pdf > 0.0 and not dlt:
                 pm = a * pdf + (1.0 - a) * voxel_pdf(gs, node, wiw)
-                wt = (wt[0] * pdf / pm, wt[1] * pdf / pm, wt[2] * pdf / pm)
-                gn *= pdf / pm
+                rb = pdf / pm  # p_bsdf / p_mixture
+                wt = (wt[0] * rb, wt[1] * rb, wt[2] * rb)
+                gn *= rb
                 pdf = pm
         nb = (b[0] * wt[0], b[1] * wt[1], b[2] * wt[2])
         bmax = max(nb[0], max(nb[1], nb[2]))
