@@ -16,8 +16,8 @@ The layout is for the memory a guided vertex touches. A sample reads the row sum
 (128 bytes of a 64 x 32 map), a density lookup one weight, which every guided vertex pays twice
 (NEE's MIS weight and the BSDF-sampled direction's mixture pdf); a map is 4.1 KiB in all, so
 hundreds of them stay in the cache. (An alias table, O(1) but 16 KiB a map beside the weights,
-made a guided pass on Cornell 70% slower in shading than the same paths with every voxel
-sharing one map's memory: cache misses, not arithmetic.) Bins below half a quantum of the
+missed the cache so often that shading with a frozen photon guide on Cornell took 1.07 s per
+32 spp against 0.76 s with this layout.) Bins below half a quantum of the
 largest one get weight 0; keeping every direction with light reachable is the BSDF's part of the
 mixture.
 """
@@ -141,8 +141,8 @@ def map_sample(rowcum, dens, wsum, pscale, slot, n_theta, n_phi, u0, u1):
 @jit(inline="always")
 def map_pdf(dens, pscale, slot, n_theta, n_phi, d):
     """Density per unit solid angle with which `map_sample` produces direction d: the bin's weight
-    times pscale = K / (4 pi W) (a multiplication: this lookup is on every guided vertex's
-    critical path, where a division cost more than the rest of it)."""
+    times pscale = K / (4 pi W) (a multiplication rather than a division: this lookup is on the
+    critical path of every guided vertex)."""
     return float(dens[slot, direction_bin(d, n_theta, n_phi)]) * pscale[slot]
 
 
