@@ -92,7 +92,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
           beta, L, depth, prev_pdf, prev_delta, gain, key, aov, max_depth, rr_depth, eps,
           alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow, gs,
           r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_L0, r_beta, r_pb, rec_base, record,
-          prev_rec):
+          prev_rec, r_prev):
     """One bounce for every active path: emission, NEE sample, BSDF sample, roulette.
 
     Entry k of the hit arrays (t, prim, b1, b2) and of ray_o/ray_d belongs to path
@@ -105,7 +105,8 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
     incident radiance, 2 of the radiance less the emission the direction hits directly (the part
     NEE samples). prev_rec[i] is the record of the path's last vertex: emission found by its
     sampled direction counts there in full (mode 1), not MIS-weighted, since the vertex's own NEE,
-    which covers the rest, is not in its record; or not at all (mode 2).
+    which covers the rest, is not in its record; or not at all (mode 2). r_prev of a record is
+    the record of the path's vertex before it (-1 at the first hit and after a delta vertex).
     """
     n = active.shape[0]
     for k in prange(n):
@@ -247,10 +248,13 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             ok = False
 
         # Record the vertex for a guide that learns (also when the path ends here: its radiance is 0)
+        last = -1
         if record > 0:
+            last = prev_rec[i]
             prev_rec[i] = -1
         if record > 0 and not delta and pdf > 0.0:
             r = rec_base + k
+            r_prev[r] = last
             prev_rec[i] = r
             r_strategy[r] = strategy
             r_node[r] = node
@@ -361,6 +365,7 @@ class Records(NamedTuple):
     beta: np.ndarray  # (R, 3) float64 throughput after the vertex (0 if the path ended)
     pb: np.ndarray  # (R,) float32 the BSDF's own density of wi (pdf is the mixture's)
     radiance: np.ndarray  # (R,) float32 luminance of the radiance that came back along wi
+    prev: np.ndarray  # (R,) int64 record of the path's previous vertex (-1: first hit, or after a delta vertex)
 
     @staticmethod
     def allocate(size):
@@ -368,7 +373,7 @@ class Records(NamedTuple):
         return Records(f3(), f3(), f3(), np.zeros(size, np.float32), np.zeros(size, np.float32),
                        np.full(size, -1, np.int8), np.full(size, -1, np.int32), np.zeros(size, np.int64),
                        np.zeros((size, 3)), np.zeros((size, 3)), np.zeros(size, np.float32),
-                       np.zeros(size, np.float32))
+                       np.zeros(size, np.float32), np.full(size, -1, np.int64))
 
     def grown(self, size, used):
         new = Records.allocate(size)
@@ -487,7 +492,7 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True)
               scene.materials.type, scene.materials.param, lights, buf.beta, buf.L, buf.depth,
               buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.aov, ctx.max_depth, ctx.rr_depth, ctx.eps,
               buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow,
-              gs, *rec[:11], n_rec, record, buf.prev_rec)
+              gs, *rec[:11], n_rec, record, buf.prev_rec, rec.prev)
         t0 = stats.tick("shade", t0)
         n_next, ns = compact(active[:n_active], buf.alive, buf.next_o, buf.next_d, buf.has_shadow, buf.sh_o,
                              buf.sh_d, buf.sh_tmax, buf.sh_L, active2, buf.ray_o, buf.ray_d, buf.sp_path,

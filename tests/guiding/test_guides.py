@@ -21,7 +21,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 GUIDES = [g for g in guide_names() if g != "bsdf"]
 # every guide at its defaults (mixing weights of least second moment), and the paper's eq. 14
 # weights (which change how often each strategy is drawn, so they must leave the mean alone too)
-VARIANTS = [(g, {}) for g in GUIDES] + [("photon", {"mixing": "eq14"})]
+VARIANTS = [(g, {}) for g in GUIDES] + [("photon", {"mixing": "eq14"}), ("photon", {"light_guiding": 0.5})]
 CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96)]
 N_TESTS = len(CASES) * len(VARIANTS) * 3
 
@@ -181,3 +181,68 @@ def test_maps_per_side_keep_guided_directions_above_the_surface():
     one = _guided_below_surface(scene, normal_classes=1)
     six = _guided_below_surface(scene)
     assert six < 0.05 and six < one / 3, (one, six)
+
+
+def test_records_link_each_vertex_to_the_one_before(tmp_path):
+    # Record r's prev is the record of the same path's previous vertex: the direction sampled
+    # there points at r's position. First hits have none.
+    scene = tracer.load_scene(scenes.closed_box(tmp_path, 0.5, 1.0, width=16, height=16))
+    from tracer.bvh import make_accel
+    from tracer.film import Film
+    from tracer.lights import build_lights
+    from tracer.render import _Context
+
+    ctx = _Context(scene, make_accel("embree", scene.tri), build_lights(scene), 5, -1, 3, "box", (0, 0, 16, 16))
+    n = 16 * 16 * 8
+    got = []
+    trace_wave(ctx, WaveBuffers(n), Film(16, 16), 0, 0, n, Stats(), observe=lambda rec: got.append(rec))
+    rec = got[0]
+    r = np.flatnonzero(rec.strategy >= 0)
+    p = rec.prev[r]
+    first = p < 0
+    assert first.sum() == n  # one first hit per path (no delta vertex in the box)
+    assert (~first).sum() > n  # and deeper vertices, linked
+    r, p = r[~first], p[~first]
+    assert (rec.strategy[p] >= 0).all() and (rec.path[p] == rec.path[r]).all() and (p < r).all()
+    d = rec.x[r].astype(np.float64) - rec.x[p].astype(np.float64)
+    ln = np.linalg.norm(d, axis=1)
+    # positions are float32 and rays start off the surface: judge segments that are not tiny
+    far = ln > 0.05 * np.median(ln)
+    assert far.mean() > 0.9
+    np.testing.assert_allclose(d[far] / ln[far, None], rec.wi[p[far]], atol=1e-3)
+
+
+def test_guided_light_tracing_keeps_the_expected_photon_power_per_voxel():
+    # With light_guiding, a photon samples its voxel's importance map or its BSDF and carries
+    # f |cos| / (mixture pdf): each voxel's expected deposited power must be what unguided light
+    # tracing deposits. Same grid for both; batches of photons give the variances of the means.
+    from tracer.guiding.photons import trace_photons
+
+    g = make_guide("photon", light_guiding=0.5)
+    tracer.render(_scene("cornell", 32, 32), spp=16, guide=g, seed=5)
+    G = g.grid
+    assert G.imap_ok[: G.n_nodes].sum() > 10, "no importance maps: nothing would be guided"
+    n_nodes = G.n_nodes
+    batches, per_batch = 24, 40_000
+
+    def run(guided):
+        power = np.zeros((batches, n_nodes))
+        count = np.zeros(n_nodes)
+        imp = G.importance_state() if guided else None
+        for b in range(batches):
+            def sink(node, bins, val, x, nrm, b=b):
+                np.add.at(power[b], node, val)
+                np.add.at(count, node, 1.0)
+            trace_photons(g.ctx, G.lookup_state(), G.data_slot[:n_nodes], per_batch, 100 + b, sink,
+                          first_hit=False, imp=imp, p_imp=0.5)
+        return power, count
+
+    pu, cu = run(False)
+    pg, cg = run(True)
+    # guiding must change where the photons go (else this test tests nothing) ...
+    top = np.argsort(-(cu + cg))[:40]
+    assert np.abs(cg[top] - cu[top]).max() > 0.2 * cu[top].max()
+    # ... but not the expected power of any voxel
+    mu, mg = pu[:, top].mean(0), pg[:, top].mean(0)
+    var = pu[:, top].var(0, ddof=1) / batches + pg[:, top].var(0, ddof=1) / batches
+    assert_z(mg, var, mu, n_tests=top.size, what="guided vs unguided photon power per voxel")

@@ -12,7 +12,12 @@ Both follow Algorithm 1 of Zhu et al. 2021 (Photon-Driven Neural Reconstruction 
   split at the middle plane (at most 3 new levels), and every valid voxel's map is reconstructed
   (normalise, then the `reconstruct` filter) and turned into a sampling table.
 - `photon`: 2^t N_p photons per iteration (N_p = `photons_per_pixel` x pixels), their power
-  binned by arrival direction (eq. 10); power maps accumulate over the iterations.
+  binned by arrival direction (eq. 10); power maps accumulate over the iterations. With
+  `light_guiding` p > 0 the photons are guided toward the camera's vertices (the paper's guided
+  light tracing, its Fig. 13, after Vorba et al. 2014): each voxel also keeps an importance map,
+  the directions from its camera vertices back to their paths' previous vertices, and a photon
+  hitting a non-delta surface there samples that map with probability p, the BSDF otherwise, its
+  weight f |cos| / the mixture's pdf (so the power maps' expectation does not change).
 - `grid`: each camera vertex adds radiance |cos| / pdf along its sampled direction, cos to its
   facing normal (the estimate of the incident radiance times the cosine integrated over the bin:
   practical path guiding learns the radiance alone; the cosine, which every diffuse vertex on the
@@ -380,19 +385,27 @@ class PhotonGuide(HistogramGuide):
     # c = 4000 rather than the paper's 500: at 256 x 256 and 2^t x 1 photon per pixel, c = 500 makes
     # ~5000 voxels on the Cornell box, each with a handful of photons; 4000 gives ~500, maps as good
     # (equal-spp relMSE on ajar/cornell), and guided passes and updates several times cheaper.
-    DEFAULTS = dict(COMMON, split_c=4000.0, sigma=1.5, photons_per_pixel=1.0)
+    # 2 photons per pixel and sigma 1.0 (rather than 1 and 1.5): on ajar the frozen maps' equal-spp
+    # relative variance went from 0.41x to 0.35x bsdf's (6 seeds) and equal-time relMSE at 40 and
+    # 80 s from 0.48x to 0.44-0.45x; cornell unchanged (0.83x / 0.79x at 10 / 80 s).
+    # light_guiding 0 (off): see trace_photons; on ajar 0.5 made the frozen maps 8% better, but the
+    # longer photon paths cost more than that at equal time (80 s: 0.47x against 0.45x).
+    DEFAULTS = dict(COMMON, split_c=4000.0, sigma=1.0, photons_per_pixel=2.0, light_guiding=0.0)
 
     def __init__(self, **settings):
         super().__init__(**settings)
         self.photons_per_pixel = _float("photons_per_pixel", self.settings["photons_per_pixel"], 0.0, 1e6)
+        self.light_guiding = _float("light_guiding", self.settings["light_guiding"], 0.0, 0.95)
 
     def _n_photons(self, iteration):
         return int(round(self.photons_per_pixel * self.ctx.n_pixels * self.spp_init * 2 ** iteration))
 
-    def _trace(self, iteration, sink):
+    def _trace(self, iteration, sink, guided=False):
         g = self.grid
+        imp = g.importance_state() if guided and self.light_guiding > 0.0 else None
         n, dep, rays = trace_photons(self.ctx, g.lookup_state(), g.data_slot[: g.n_nodes], self._n_photons(iteration),
-                                     iteration, sink, first_hit=self.learn_direct)
+                                     iteration, sink, first_hit=self.learn_direct, imp=imp,
+                                     p_imp=self.light_guiding)
         self.info["photons"] += n
         self.info["deposits"] += dep
         self.info["photon_rays"] += rays
@@ -408,6 +421,28 @@ class PhotonGuide(HistogramGuide):
         g.node_count[:] = 0.0
         g.accumulate(g.locate(x, n), bins, val)
 
+    def _observe_data(self, rec):
+        if self.light_guiding > 0.0:
+            self.grid.splat_importance(rec)
+
+    def _importance_maps(self):
+        """Guided light tracing: the importance maps (camera vertices by direction, accumulated
+        over the iterations) normalised, filtered like the radiance maps, into sampling tables."""
+        g = self.grid
+        slots = g.slots_in_use()
+        if slots.size == 0:
+            return
+        total = _row_sums(g.ipower, slots)
+        has = total > 0.0
+        slots, total = slots[has], total[has]
+        if slots.size == 0:
+            return
+        maps = _normalised(g.ipower, slots, total).reshape(-1, self.map_height, self.map_width)
+        mask = maps > 0.0
+        g.set_importance_maps(slots, build_tables(self.reconstructor.reconstruct(maps, mask.astype(np.float32), mask)))
+
     def _iterate_data(self):
         g = self.grid
-        self._trace(self.iteration, lambda node, b, v, x, n: g.accumulate(node, b, v))
+        if self.light_guiding > 0.0:
+            self._importance_maps()
+        self._trace(self.iteration, lambda node, b, v, x, n: g.accumulate(node, b, v), guided=True)

@@ -18,7 +18,7 @@ import numpy as np
 from numba import prange
 
 from .. import bsdfs
-from .._jit import kernel
+from .._jit import jit, kernel
 from ..lights import sample_light
 from ..rng import P_DIR, P_LIGHT, P_POS, P_RR, photon_dim, photon_key, uniform
 from ..sampling import (
@@ -32,7 +32,7 @@ from ..sampling import (
     to_world,
     triangle_point,
 )
-from .directional import direction_bin
+from .directional import direction_bin, map_pdf, map_sample
 from .spatial import find_voxel
 
 
@@ -88,12 +88,14 @@ def emit(lt, tri, centre, radius, eps, seed, iteration, g0, key, o, d, power, th
 @kernel
 def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type, mat_param, gs, data_slot,
             key, power, thr, depth, max_hits, rr_depth, eps, alive, next_o, next_d,
-            dep_node, dep_bin, dep_val, dep_x, dep_n, first_hit):
+            dep_node, dep_bin, dep_val, dep_x, dep_n, first_hit, imp, p_imp):
     """One hit for every active photon: deposit, then sample the BSDF (importance mode) and roulette.
 
     Entry k of the hit arrays belongs to photon active[k]; writes its deposit (dep_node -1 for
     none) and its continuation (alive[k], next_o/next_d[k]). Photons deposit at their first hit
-    (direct light) only if `first_hit`.
+    (direct light) only if `first_hit`. Guided light tracing: at a non-delta hit whose voxel has
+    an importance map in `imp` (a GuideState on gs's tree), the direction comes from that map with
+    probability p_imp, else from the BSDF, and the photon's weight is f |cos| / the mixture's pdf.
     """
     n = active.shape[0]
     for k in prange(n):
@@ -109,11 +111,12 @@ def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type,
         win = (-d[k, 0], -d[k, 1], -d[k, 2])  # toward where the photon came from
         delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
         pw = (power[i, 0] * thr[i, 0], power[i, 1] * thr[i, 1], power[i, 2] * thr[i, 2])
-        if not delta and (first_hit or depth[i] > 0):
+        node = -1
+        if not delta and (first_hit or depth[i] > 0 or p_imp > 0.0):
             cw = dot(win, ng)
             nf = ng if cw >= 0.0 else (-ng[0], -ng[1], -ng[2])  # the side the photon arrives on
             node = find_voxel(gs, x, nf)
-            if node >= 0 and data_slot[node] >= 0:
+            if node >= 0 and data_slot[node] >= 0 and (first_hit or depth[i] > 0):
                 dep_node[k] = node
                 dep_bin[k] = direction_bin(win, gs.n_theta, gs.n_phi)
                 dep_val[k] = 0.2126 * pw[0] + 0.7152 * pw[1] + 0.0722 * pw[2]
@@ -124,9 +127,28 @@ def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type,
             continue
         s, tt = frame(ng)
         kk = key[i]
-        wi, wt, pdf, _ = bsdfs.bsdf_sample(mat_type, mat_param, m, to_local(win, s, tt, ng),
-                                          uniform(kk, photon_dim(dk, 0)), uniform(kk, photon_dim(dk, 1)),
-                                          uniform(kk, photon_dim(dk, 2)), False)
+        wo = to_local(win, s, tt, ng)
+        u0 = uniform(kk, photon_dim(dk, 0))
+        u1 = uniform(kk, photon_dim(dk, 1))
+        u2 = uniform(kk, photon_dim(dk, 2))  # the strategy, then (rescaled) the BSDF's lobe
+        islot = imp.slot[node] if node >= 0 else -1
+        if islot >= 0 and u2 < p_imp:
+            wiw, pg = map_sample(imp.rowcum, imp.dens, imp.wsum, imp.pscale, islot, imp.n_theta, imp.n_phi, u0, u1)
+            wi = to_local(wiw, s, tt, ng)
+            f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wi, False)
+            pm = (1.0 - p_imp) * bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wi) + p_imp * pg
+            wt = (0.0, 0.0, 0.0)
+            if pm > 0.0:
+                wt = (f[0] / pm, f[1] / pm, f[2] / pm)
+        else:
+            if islot >= 0:
+                u2 = min((u2 - p_imp) / (1.0 - p_imp), 1.0 - 1e-12)
+            wi, wt, pdf, dlt = bsdfs.bsdf_sample(mat_type, mat_param, m, wo, u0, u1, u2, False)
+            if islot >= 0 and pdf > 0.0 and not dlt:
+                pm = (1.0 - p_imp) * pdf + p_imp * map_pdf(imp.dens, imp.pscale, islot, imp.n_theta, imp.n_phi,
+                                                          to_world(wi, s, tt, ng))
+                r = pdf / pm
+                wt = (wt[0] * r, wt[1] * r, wt[2] * r)
         nb = (thr[i, 0] * wt[0], thr[i, 1] * wt[1], thr[i, 2] * wt[2])
         bmax = max(nb[0], max(nb[1], nb[2]))
         if not (bmax > 0.0) or not math.isfinite(bmax):
@@ -146,6 +168,31 @@ def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type,
         alive[k] = True
 
 
+@jit
+def compact_wave(m, alive, next_o, next_d, active, o, d, dep_node, dep_bin, dep_val, dep_x, dep_n):
+    """After a bounce of the m photons active[:m]: move the survivors' rays (next_o/next_d) and ids
+    to the front of o, d and active, and the deposits (dep_node >= 0) to the front of the dep_*
+    arrays, keeping their order. In place (writes never pass reads). Returns (survivors, deposits)."""
+    na = 0
+    nd = 0
+    for k in range(m):
+        if alive[k]:
+            active[na] = active[k]
+            for c in range(3):
+                o[na, c] = next_o[k, c]
+                d[na, c] = next_d[k, c]
+            na += 1
+        if dep_node[k] >= 0:
+            dep_node[nd] = dep_node[k]
+            dep_bin[nd] = dep_bin[k]
+            dep_val[nd] = dep_val[k]
+            for c in range(3):
+                dep_x[nd, c] = dep_x[k, c]
+                dep_n[nd, c] = dep_n[k, c]
+            nd += 1
+    return na, nd
+
+
 class PhotonBuffers:
     def __init__(self, size):
         self.size = size
@@ -155,6 +202,8 @@ class PhotonBuffers:
         self.depth = np.zeros(size, np.int32)
         self.alive = np.zeros(size, np.bool_)
         self.next_o, self.next_d = z3(), z3()
+        self.active = np.zeros(size, np.int64)  # the photons still travelling, and their rays
+        self.ray_o, self.ray_d = z3(), z3()
         self.dep_node = np.zeros(size, np.int64)
         self.dep_bin = np.zeros(size, np.int64)
         self.dep_val = np.zeros(size)
@@ -163,12 +212,13 @@ class PhotonBuffers:
 
 
 def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 << 16, max_hits=None,
-                  first_hit=True):
+                  first_hit=True, imp=None, p_imp=0.0):
     """Trace `n_photons` photons of guide iteration `iteration`; after every bounce call
     sink(node, bin, value, x, n) with that bounce's deposits (arrays of equal length; n is the
     normal on the side the photon arrived on); with
-    first_hit False, photons deposit from their second hit on (indirect light only).
-    Returns (photons traced, deposits, rays)."""
+    first_hit False, photons deposit from their second hit on (indirect light only). With an
+    importance state `imp` (GuideState.importance_state()) and p_imp > 0, light tracing is guided
+    (see scatter). Returns (photons traced, deposits, rays)."""
     scene, accel, lt = ctx.scene, ctx.accel, ctx.lights
     if max_hits is None:
         max_hits = ctx.max_depth - 1 if ctx.max_depth > 0 else 64
@@ -176,31 +226,32 @@ def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 <<
     centre = 0.5 * (scene.bounds[0] + scene.bounds[1])
     radius = 0.5 * float(np.linalg.norm(scene.bounds[1] - scene.bounds[0])) * 1.01 + ctx.eps
     buf = PhotonBuffers(min(wave_size, max(n_photons, 1)))
+    if imp is None or not p_imp > 0.0:
+        imp = gs._replace(slot=np.full(gs.slot.shape[0], -1, np.int32))
+        p_imp = 0.0
     deposits = 0
     rays = 0
     for g0 in range(0, n_photons, buf.size):
         n = min(buf.size, n_photons - g0)
         emit(lt, scene.tri, centre, radius, ctx.eps, ctx.seed, iteration, g0, buf.key[:n], buf.o[:n], buf.d[:n],
              buf.power[:n], buf.thr[:n], buf.depth[:n])
-        active = np.arange(n)
-        o, d = buf.o[:n].copy(), buf.d[:n].copy()
-        live = np.any(buf.power[:n] > 0.0, axis=1)
-        active, o, d = active[live], o[live], d[live]
-        while active.size:
+        live = np.flatnonzero(np.any(buf.power[:n] > 0.0, axis=1))
+        m = live.size
+        active = buf.active
+        active[:m] = live
+        buf.ray_o[:m], buf.ray_d[:m] = buf.o[live], buf.d[live]
+        while m:
+            o, d = buf.ray_o[:m], buf.ray_d[:m]
             t, prim, b1, b2 = accel.intersect(o, d)
-            rays += active.size
-            m = active.size
-            scatter(active, d, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
+            rays += m
+            scatter(active[:m], d, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
                     scene.materials.type, scene.materials.param, gs, data_slot, buf.key, buf.power, buf.thr,
                     buf.depth, max_hits, ctx.rr_depth, ctx.eps, buf.alive[:m], buf.next_o[:m], buf.next_d[:m],
-                    buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m], buf.dep_n[:m], first_hit)
-            has = buf.dep_node[:m] >= 0
-            if has.any():
-                deposits += int(has.sum())
-                sink(buf.dep_node[:m][has], buf.dep_bin[:m][has], buf.dep_val[:m][has], buf.dep_x[:m][has],
-                     buf.dep_n[:m][has])
-            keep = np.flatnonzero(buf.alive[:m])
-            active = active[keep]
-            o = buf.next_o[:m][keep]
-            d = buf.next_d[:m][keep]
+                    buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m], buf.dep_n[:m], first_hit,
+                    imp, float(p_imp))
+            m, nd = compact_wave(m, buf.alive, buf.next_o, buf.next_d, active, buf.ray_o, buf.ray_d,
+                                 buf.dep_node, buf.dep_bin, buf.dep_val, buf.dep_x, buf.dep_n)
+            if nd:
+                deposits += nd
+                sink(buf.dep_node[:nd], buf.dep_bin[:nd], buf.dep_val[:nd], buf.dep_x[:nd], buf.dep_n[:nd])
     return n_photons, deposits, rays

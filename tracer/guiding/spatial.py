@@ -205,6 +205,33 @@ def _splat_records(node, strategy, wi, n, pdf, radiance, n_theta, n_phi, data_sl
         node_count[nd] += 1.0
 
 
+@jit
+def _splat_importance(node, strategy, prev, x, n_theta, n_phi, data_slot, ipower):
+    """For guided light tracing: every record whose path came from a recorded vertex adds 1 to
+    its leaf's importance histogram, in the bin of the direction back to that vertex (where a
+    photon leaving this voxel meets the camera vertices that queried a map)."""
+    for i in range(node.shape[0]):
+        nd = node[i]
+        j = prev[i]
+        if strategy[i] < 0 or nd < 0 or j < 0 or strategy[j] < 0:
+            continue
+        s = data_slot[nd]
+        if s < 0:
+            continue
+        d0 = float(x[j, 0]) - float(x[i, 0])
+        d1 = float(x[j, 1]) - float(x[i, 1])
+        d2 = float(x[j, 2]) - float(x[i, 2])
+        ln = (d0 * d0 + d1 * d1 + d2 * d2) ** 0.5
+        if not ln > 0.0:
+            continue
+        ipower[s, direction_bin((d0 / ln, d1 / ln, d2 / ln), n_theta, n_phi)] += 1.0
+
+
+# per data slot: histogram, counts, previous map, sampling tables; the same for importance maps
+SLOT_ARRAYS = ("power", "count", "prev", "rowcum", "dens", "wsum", "pscale", "ipower", "irowcum", "idens", "iwsum",
+               "ipscale")
+
+
 class HierarchicalGrid:
     """Uniform cells, each the root of a binary tree; data slots for the visited voxels."""
 
@@ -243,6 +270,7 @@ class HierarchicalGrid:
         self.mis_n = np.zeros((cap, 2))
         self.data_slot = np.full(cap, -1, np.int32)  # histogram slot of a leaf
         self.map_ok = np.zeros(cap, np.bool_)  # the slot's CDF is usable
+        self.imap_ok = np.zeros(cap, np.bool_)  # the slot's importance map is usable (guided light tracing)
         scap = 64
         self.power = np.zeros((scap, self.K), np.float32)
         self.count = np.zeros((scap, self.K), np.float32)
@@ -251,6 +279,12 @@ class HierarchicalGrid:
         self.dens = np.zeros((scap, self.K), np.uint16)
         self.wsum = np.ones(scap)
         self.pscale = np.zeros(scap)
+        # importance maps, for guided light tracing: histogram and sampling tables, as above
+        self.ipower = np.zeros((scap, self.K), np.float32)
+        self.irowcum = np.zeros((scap, self.n_theta + 1), np.uint32)
+        self.idens = np.zeros((scap, self.K), np.uint16)
+        self.iwsum = np.ones(scap)
+        self.ipscale = np.zeros(scap)
         self.slot_node = np.full(scap, -1, np.int64)
         self.free = []
         self.n_slots = 0
@@ -262,7 +296,7 @@ class HierarchicalGrid:
             return
         new = max(need, 2 * cap)
         for name in ("child", "axis", "split", "depth", "box_lo", "box_hi", "node_count", "last_visit",
-                     "alpha", "mis_sum", "mis_n", "data_slot", "map_ok"):
+                     "alpha", "mis_sum", "mis_n", "data_slot", "map_ok", "imap_ok"):
             a = getattr(self, name)
             fill = {"child": -1, "data_slot": -1, "last_visit": -(1 << 30), "alpha": 0.5}.get(name, 0)
             b = np.full((new,) + a.shape[1:], fill, a.dtype)
@@ -277,7 +311,7 @@ class HierarchicalGrid:
             self.n_slots += 1
             cap = self.power.shape[0]
             if self.n_slots > cap:
-                for name in ("power", "count", "prev", "rowcum", "dens", "wsum", "pscale", "slot_node"):
+                for name in SLOT_ARRAYS + ("slot_node",):
                     a = getattr(self, name)
                     b = np.zeros((2 * cap,) + a.shape[1:], a.dtype) if name != "slot_node" else np.full(2 * cap, -1, a.dtype)
                     b[:cap] = a
@@ -289,9 +323,15 @@ class HierarchicalGrid:
         self.dens[s] = 0
         self.wsum[s] = 1.0
         self.pscale[s] = 0.0
+        self.ipower[s] = 0.0
+        self.irowcum[s] = 0
+        self.idens[s] = 0
+        self.iwsum[s] = 1.0
+        self.ipscale[s] = 0.0
         self.slot_node[s] = node
         self.data_slot[node] = s
         self.map_ok[node] = False
+        self.imap_ok[node] = False
         return s
 
     def release(self, node):
@@ -301,6 +341,7 @@ class HierarchicalGrid:
             self.free.append(int(s))
             self.data_slot[node] = -1
             self.map_ok[node] = False
+            self.imap_ok[node] = False
 
     def leaves(self):
         n = self.n_nodes
@@ -311,8 +352,8 @@ class HierarchicalGrid:
 
     def memory_bytes(self):
         arrays = (self.child, self.axis, self.split, self.depth, self.box_lo, self.box_hi, self.node_count,
-                  self.last_visit, self.alpha, self.mis_sum, self.mis_n, self.data_slot, self.map_ok,
-                  self.power, self.count, self.prev, self.rowcum, self.dens, self.wsum, self.pscale, self.slot_node)
+                  self.last_visit, self.alpha, self.mis_sum, self.mis_n, self.data_slot, self.map_ok, self.imap_ok,
+                  self.slot_node) + tuple(getattr(self, name) for name in SLOT_ARRAYS)
         return int(sum(a.nbytes for a in arrays))
 
     # --- what the kernels read ---------------------------------------------------------------
@@ -323,6 +364,14 @@ class HierarchicalGrid:
         return GuideState(self.lo.copy(), np.full(3, 1.0 / self.side), self.res.astype(np.int64),
                           self.child[:n], self.axis[:n], self.split[:n], slot, self.alpha[:n],
                           self.rowcum[:m], self.dens[:m], self.wsum[:m], self.pscale[:m], self.n_theta, self.n_phi, self.n_class)
+
+    def importance_state(self):
+        """A state whose maps are the importance maps (guided light tracing); same tree."""
+        n = self.n_nodes
+        slot = np.where(self.imap_ok[:n], self.data_slot[:n], -1).astype(np.int32)
+        m = max(self.n_slots, 1)
+        return self.state()._replace(slot=slot, rowcum=self.irowcum[:m], dens=self.idens[:m], wsum=self.iwsum[:m],
+                                     pscale=self.ipscale[:m])
 
     def lookup_state(self):
         """A state for locating points only (no maps)."""
@@ -359,6 +408,17 @@ class HierarchicalGrid:
         self.rowcum[slots], self.dens[slots], self.wsum[slots] = tabs.rowcum, tabs.dens, tabs.wsum
         self.pscale[slots] = tabs.pscale
         self.map_ok[self.slot_node[slots]] = tabs.usable
+
+    def set_importance_maps(self, slots, tabs):
+        """The sampling tables of the importance maps in these data slots."""
+        self.irowcum[slots], self.idens[slots], self.iwsum[slots] = tabs.rowcum, tabs.dens, tabs.wsum
+        self.ipscale[slots] = tabs.pscale
+        self.imap_ok[self.slot_node[slots]] = tabs.usable
+
+    def splat_importance(self, rec):
+        """The records' directions back to their paths' previous vertices into the importance maps."""
+        _splat_importance(rec.node, rec.strategy, rec.prev, rec.x, self.n_theta, self.n_phi, self.data_slot,
+                          self.ipower)
 
     def splat_records(self, rec):
         """Each record's radiance |cos| / pdf into its leaf's histogram (the `grid` guide's data)."""
@@ -398,15 +458,16 @@ class HierarchicalGrid:
         if s >= 0:  # children inherit the data halved and the map; the parent keeps nothing
             self.power[s] *= 0.5
             self.count[s] *= 0.5
+            self.ipower[s] *= 0.5
             self.data_slot[node] = -1
             self.data_slot[c] = s
             self.slot_node[s] = c
-            self.map_ok[c] = self.map_ok[node]
             s2 = self._new_slot(c + 1)
-            for name in ("power", "count", "prev", "rowcum", "dens", "wsum", "pscale"):
+            for name in SLOT_ARRAYS:
                 getattr(self, name)[s2] = getattr(self, name)[s]
-            self.map_ok[c + 1] = self.map_ok[node]
-            self.map_ok[node] = False
+            for ok in (self.map_ok, self.imap_ok):
+                ok[c] = ok[c + 1] = ok[node]
+                ok[node] = False
         return c
 
     def split_mid(self, threshold, max_levels=3):
