@@ -291,21 +291,28 @@ class HistogramGuide:
         lo, hi = x.min(axis=0), x.max(axis=0)
         pad = 1e-4 * max(float(np.linalg.norm(hi - lo)), 1e-6)
         g = self.grid = HierarchicalGrid(lo - pad, hi + pad, self.resolution, self.map_height, self.map_width,
-                                         self.n_class)
+                                         self.n_class, importance=self._importance_maps_wanted())
         g.visit(g.locate(x, pts["n"]), 0)
         self._initial_data(pts)
 
-    def _reconstruct(self):
-        g = self.grid
-        slots = g.slots_in_use()
+    def _normalised_maps(self, hist):
+        """(slots, maps): the slots in use whose histogram rows in `hist` have a positive total,
+        and those rows divided by it, as (n, map_height, map_width) float32."""
+        slots = self.grid.slots_in_use()
         if slots.size == 0:
-            return
-        total = _row_sums(g.power, slots)
+            return slots, None
+        total = _row_sums(hist, slots)
         has = total > 0.0
         slots, total = slots[has], total[has]
         if slots.size == 0:
+            return slots, None
+        return slots, _normalised(hist, slots, total).reshape(-1, self.map_height, self.map_width)
+
+    def _reconstruct(self):
+        g = self.grid
+        slots, maps = self._normalised_maps(g.power)
+        if maps is None:
             return
-        maps = _normalised(g.power, slots, total).reshape(-1, self.map_height, self.map_width)
         counts = g.count[slots].reshape(maps.shape)
         rec = self.reconstructor.reconstruct(maps, counts, counts > 0)
         g.set_maps(slots, build_tables(rec))
@@ -334,6 +341,9 @@ class HistogramGuide:
         g.alpha[:n][ok] = np.clip(a, self.alpha_min, self.alpha_max)
 
     # --- what the two guides do differently ----------------------------------------------------------
+    def _importance_maps_wanted(self):
+        return False
+
     def _initial_data(self, pilot):
         raise NotImplementedError
 
@@ -421,6 +431,9 @@ class PhotonGuide(HistogramGuide):
         g.node_count[:] = 0.0
         g.accumulate(g.locate(x, n), bins, val)
 
+    def _importance_maps_wanted(self):
+        return self.light_guiding > 0.0
+
     def _observe_data(self, rec):
         if self.light_guiding > 0.0:
             self.grid.splat_importance(rec)
@@ -429,15 +442,9 @@ class PhotonGuide(HistogramGuide):
         """Guided light tracing: the importance maps (camera vertices by direction, accumulated
         over the iterations) normalised, filtered like the radiance maps, into sampling tables."""
         g = self.grid
-        slots = g.slots_in_use()
-        if slots.size == 0:
+        slots, maps = self._normalised_maps(g.ipower)
+        if maps is None:
             return
-        total = _row_sums(g.ipower, slots)
-        has = total > 0.0
-        slots, total = slots[has], total[has]
-        if slots.size == 0:
-            return
-        maps = _normalised(g.ipower, slots, total).reshape(-1, self.map_height, self.map_width)
         mask = maps > 0.0
         g.set_importance_maps(slots, build_tables(self.reconstructor.reconstruct(maps, mask.astype(np.float32), mask)))
 

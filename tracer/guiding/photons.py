@@ -214,8 +214,8 @@ class PhotonBuffers:
 def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 << 16, max_hits=None,
                   first_hit=True, imp=None, p_imp=0.0):
     """Trace `n_photons` photons of guide iteration `iteration`; after every bounce call
-    sink(node, bin, value, x, n) with that bounce's deposits (arrays of equal length; n is the
-    normal on the side the photon arrived on); with
+    sink(node, bin, value, x, n) with that bounce's deposits (arrays of equal length, views into
+    buffers that the next bounce overwrites; n is the normal on the side the photon arrived on); with
     first_hit False, photons deposit from their second hit on (indirect light only). With an
     importance state `imp` (GuideState.importance_state()) and p_imp > 0, light tracing is guided
     (see scatter). Returns (photons traced, deposits, rays)."""

@@ -235,7 +235,7 @@ SLOT_ARRAYS = ("power", "count", "prev", "rowcum", "dens", "wsum", "pscale", "ip
 class HierarchicalGrid:
     """Uniform cells, each the root of a binary tree; data slots for the visited voxels."""
 
-    def __init__(self, lo, hi, resolution, n_theta, n_phi, n_class=1):
+    def __init__(self, lo, hi, resolution, n_theta, n_phi, n_class=1, importance=False):
         lo = np.asarray(lo, dtype=np.float64)
         hi = np.asarray(hi, dtype=np.float64)
         ext = np.maximum(hi - lo, 1e-9)
@@ -279,10 +279,13 @@ class HierarchicalGrid:
         self.dens = np.zeros((scap, self.K), np.uint16)
         self.wsum = np.ones(scap)
         self.pscale = np.zeros(scap)
-        # importance maps, for guided light tracing: histogram and sampling tables, as above
-        self.ipower = np.zeros((scap, self.K), np.float32)
-        self.irowcum = np.zeros((scap, self.n_theta + 1), np.uint32)
-        self.idens = np.zeros((scap, self.K), np.uint16)
+        # importance maps, for guided light tracing: histogram and sampling tables, as above (empty
+        # rows without `importance`)
+        self.importance = bool(importance)
+        ki, ri = (self.K, self.n_theta + 1) if self.importance else (0, 0)
+        self.ipower = np.zeros((scap, ki), np.float32)
+        self.irowcum = np.zeros((scap, ri), np.uint32)
+        self.idens = np.zeros((scap, ki), np.uint16)
         self.iwsum = np.ones(scap)
         self.ipscale = np.zeros(scap)
         self.slot_node = np.full(scap, -1, np.int64)
@@ -367,6 +370,8 @@ class HierarchicalGrid:
 
     def importance_state(self):
         """A state whose maps are the importance maps (guided light tracing); same tree."""
+        if not self.importance:
+            raise ValueError("this grid keeps no importance maps (HierarchicalGrid(..., importance=True))")
         n = self.n_nodes
         slot = np.where(self.imap_ok[:n], self.data_slot[:n], -1).astype(np.int32)
         m = max(self.n_slots, 1)
@@ -417,6 +422,8 @@ class HierarchicalGrid:
 
     def splat_importance(self, rec):
         """The records' directions back to their paths' previous vertices into the importance maps."""
+        if not self.importance:
+            raise ValueError("this grid keeps no importance maps (HierarchicalGrid(..., importance=True))")
         _splat_importance(rec.node, rec.strategy, rec.prev, rec.x, self.n_theta, self.n_phi, self.data_slot,
                           self.ipower)
 
