@@ -319,18 +319,8 @@ class HierarchicalGrid:
                     b = np.zeros((2 * cap,) + a.shape[1:], a.dtype) if name != "slot_node" else np.full(2 * cap, -1, a.dtype)
                     b[:cap] = a
                     setattr(self, name, b)
-        self.power[s] = 0.0
-        self.count[s] = 0.0
-        self.prev[s] = 0.0
-        self.rowcum[s] = 0
-        self.dens[s] = 0
-        self.wsum[s] = 1.0
-        self.pscale[s] = 0.0
-        self.ipower[s] = 0.0
-        self.irowcum[s] = 0
-        self.idens[s] = 0
-        self.iwsum[s] = 1.0
-        self.ipscale[s] = 0.0
+        for name in SLOT_ARRAYS:
+            getattr(self, name)[s] = 1.0 if name in ("wsum", "iwsum") else 0
         self.slot_node[s] = node
         self.data_slot[node] = s
         self.map_ok[node] = False
