@@ -400,11 +400,12 @@ class PhotonGuide(HistogramGuide):
     # 80 s from 0.48x to 0.44-0.45x; cornell unchanged (0.83x / 0.79x at 10 / 80 s).
     # light_guiding 0 (off): see trace_photons; on ajar 0.5 made the frozen maps 8% better, but the
     # longer photon paths cost more than that at equal time (80 s: 0.47x against 0.45x).
-    # resolution 24 (grid guide: 8): frozen maps at full resolution (32 spp x 3 seeds, trained at 128
-    # spp), relative variance as a ratio to bsdf's with resolution 16 -> 24: ajar 0.26 -> 0.22,
-    # caustic 0.61 -> 0.36, cornell 0.42 -> 0.40, window 0.48 -> 0.48; 32 and 48 no better.
-    # (At half resolution, with a quarter of the photons, 24 had shown no gain.)
-    DEFAULTS = dict(COMMON, split_c=4000.0, resolution=24, sigma=1.0, photons_per_pixel=2.0, light_guiding=0.0)
+    # resolution 16, not 24: with 24, ajar's frozen maps after all 5 iterations were better (relative
+    # variance 0.22x bsdf's against 0.26x; caustic 0.36x against 0.61x), but after 3 iterations (what
+    # a 10 s budget trains) they were far worse (0.89x against 0.33x: the median map held 283
+    # photons), and at equal time ajar went 0.59 / 0.51 / 0.45 / 0.43x -> 0.81 / 0.75 / 0.43 / 0.40x
+    # at 10 / 20 / 40 / 80 s. A per-map blur widened where photons are few did not rescue it.
+    DEFAULTS = dict(COMMON, split_c=4000.0, sigma=1.0, photons_per_pixel=2.0, light_guiding=0.0)
 
     def __init__(self, **settings):
         super().__init__(**settings)
