@@ -228,7 +228,7 @@ def test_guided_light_tracing_keeps_the_expected_photon_power_per_voxel():
     def run(guided):
         power = np.zeros((batches, n_nodes))
         count = np.zeros(n_nodes)
-        imp = G.importance_state() if guided else None
+        imp = G.state(importance=True) if guided else None
         for b in range(batches):
             def sink(node, bins, val, x, nrm, b=b):
                 np.add.at(power[b], node, val)

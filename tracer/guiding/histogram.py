@@ -417,7 +417,7 @@ class PhotonGuide(HistogramGuide):
 
     def _trace(self, iteration, sink, guided=False):
         g = self.grid
-        imp = g.importance_state() if guided and self.light_guiding > 0.0 else None
+        imp = g.state(importance=True) if guided and self.light_guiding > 0.0 else None
         n, dep, rays = trace_photons(self.ctx, g.lookup_state(), g.data_slot[: g.n_nodes], self._n_photons(iteration),
                                      iteration, sink, first_hit=self.learn_direct, imp=imp,
                                      p_imp=self.light_guiding)
@@ -451,7 +451,8 @@ class PhotonGuide(HistogramGuide):
         if maps is None:
             return
         mask = maps > 0.0
-        g.set_importance_maps(slots, build_tables(self.reconstructor.reconstruct(maps, mask.astype(np.float32), mask)))
+        rec = self.reconstructor.reconstruct(maps, mask.astype(np.float32), mask)
+        g.set_maps(slots, build_tables(rec), importance=True)
 
     def _iterate_data(self):
         g = self.grid

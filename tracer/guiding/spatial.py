@@ -350,23 +350,20 @@ class HierarchicalGrid:
         return int(sum(a.nbytes for a in arrays))
 
     # --- what the kernels read ---------------------------------------------------------------
-    def state(self):
+    def state(self, importance=False):
+        """The arrays the kernels read: the tree and, per leaf, its sampling map (slot -1 where it has
+        none usable); with `importance`, the importance maps (guided light tracing) instead."""
+        if importance and not self.importance:
+            raise ValueError("this grid keeps no importance maps (HierarchicalGrid(..., importance=True))")
+        p = "i" if importance else ""
         n = self.n_nodes
-        slot = np.where(self.map_ok[:n], self.data_slot[:n], -1).astype(np.int32)
+        ok = self.imap_ok if importance else self.map_ok
+        slot = np.where(ok[:n], self.data_slot[:n], -1).astype(np.int32)
         m = max(self.n_slots, 1)
+        tables = [getattr(self, p + name)[:m] for name in ("rowcum", "dens", "wsum", "pscale")]
         return GuideState(self.lo.copy(), np.full(3, 1.0 / self.side), self.res.astype(np.int64),
                           self.child[:n], self.axis[:n], self.split[:n], slot, self.alpha[:n],
-                          self.rowcum[:m], self.dens[:m], self.wsum[:m], self.pscale[:m], self.n_theta, self.n_phi, self.n_class)
-
-    def importance_state(self):
-        """A state whose maps are the importance maps (guided light tracing); same tree."""
-        if not self.importance:
-            raise ValueError("this grid keeps no importance maps (HierarchicalGrid(..., importance=True))")
-        n = self.n_nodes
-        slot = np.where(self.imap_ok[:n], self.data_slot[:n], -1).astype(np.int32)
-        m = max(self.n_slots, 1)
-        return self.state()._replace(slot=slot, rowcum=self.irowcum[:m], dens=self.idens[:m], wsum=self.iwsum[:m],
-                                     pscale=self.ipscale[:m])
+                          *tables, self.n_theta, self.n_phi, self.n_class)
 
     def lookup_state(self):
         """A state for locating points only (no maps)."""
@@ -398,17 +395,13 @@ class HierarchicalGrid:
             self._new_slot(int(nd))
         return n
 
-    def set_maps(self, slots, tabs):
-        """The sampling tables (directional.MapTables) of the maps in these data slots."""
-        self.rowcum[slots], self.dens[slots], self.wsum[slots] = tabs.rowcum, tabs.dens, tabs.wsum
-        self.pscale[slots] = tabs.pscale
-        self.map_ok[self.slot_node[slots]] = tabs.usable
-
-    def set_importance_maps(self, slots, tabs):
-        """The sampling tables of the importance maps in these data slots."""
-        self.irowcum[slots], self.idens[slots], self.iwsum[slots] = tabs.rowcum, tabs.dens, tabs.wsum
-        self.ipscale[slots] = tabs.pscale
-        self.imap_ok[self.slot_node[slots]] = tabs.usable
+    def set_maps(self, slots, tabs, importance=False):
+        """The sampling tables (directional.MapTables) of the maps in these data slots (with
+        `importance`, of their importance maps)."""
+        p = "i" if importance else ""
+        for name in ("rowcum", "dens", "wsum", "pscale"):
+            getattr(self, p + name)[slots] = getattr(tabs, name)
+        (self.imap_ok if importance else self.map_ok)[self.slot_node[slots]] = tabs.usable
 
     def splat_importance(self, rec):
         """The records' directions back to their paths' previous vertices into the importance maps."""
