@@ -217,8 +217,8 @@ def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 <<
     sink(node, bin, value, x, n) with that bounce's deposits (arrays of equal length, views into
     buffers that the next bounce overwrites; n is the normal on the side the photon arrived on); with
     first_hit False, photons deposit from their second hit on (indirect light only). With an
-    importance state `imp` (HierarchicalGrid.state(importance=True)) and p_imp > 0, light tracing is guided
-    (see scatter). Returns (photons traced, deposits, rays)."""
+    importance state `imp` (HierarchicalGrid.state(importance=True)) and p_imp > 0, light tracing
+    is guided (see scatter). Returns (photons traced, deposits, rays)."""
     scene, accel, lt = ctx.scene, ctx.accel, ctx.lights
     if max_hits is None:
         max_hits = ctx.max_depth - 1 if ctx.max_depth > 0 else 64

@@ -343,6 +343,10 @@ class HierarchicalGrid:
     def slots_in_use(self):
         return np.flatnonzero(self.slot_node[: self.n_slots] >= 0)
 
+    def _require_importance(self):
+        if not self.importance:
+            raise ValueError("this grid keeps no importance maps (HierarchicalGrid(..., importance=True))")
+
     def memory_bytes(self):
         arrays = (self.child, self.axis, self.split, self.depth, self.box_lo, self.box_hi, self.node_count,
                   self.last_visit, self.alpha, self.mis_sum, self.mis_n, self.data_slot, self.map_ok, self.imap_ok,
@@ -353,8 +357,8 @@ class HierarchicalGrid:
     def state(self, importance=False):
         """The arrays the kernels read: the tree and, per leaf, its sampling map (slot -1 where it has
         none usable); with `importance`, the importance maps (guided light tracing) instead."""
-        if importance and not self.importance:
-            raise ValueError("this grid keeps no importance maps (HierarchicalGrid(..., importance=True))")
+        if importance:
+            self._require_importance()
         p = "i" if importance else ""
         n = self.n_nodes
         ok = self.imap_ok if importance else self.map_ok
@@ -405,8 +409,7 @@ class HierarchicalGrid:
 
     def splat_importance(self, rec):
         """The records' directions back to their paths' previous vertices into the importance maps."""
-        if not self.importance:
-            raise ValueError("this grid keeps no importance maps (HierarchicalGrid(..., importance=True))")
+        self._require_importance()
         _splat_importance(rec.node, rec.strategy, rec.prev, rec.x, self.n_theta, self.n_phi, self.data_slot,
                           self.ipower)
 
