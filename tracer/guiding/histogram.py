@@ -364,19 +364,11 @@ class GridGuide(HistogramGuide):
     # coarser and smoother than the photon maps: camera-path estimates (radiance |cos| / pdf) are noisier
     DEFAULTS = dict(COMMON, split_c=4000.0, resolution=8, sigma=2.0)
 
-    def _splat(self, x, n, wi, pdf, radiance):
-        g = self.grid
-        nodes = g.locate(x, n)
-        bins = bin_of_batch(np.ascontiguousarray(wi, dtype=np.float64), self.map_height, self.map_width)
-        cos = np.abs(np.einsum("ij,ij->i", wi.astype(np.float64), n.astype(np.float64)))
-        val = np.where(pdf > 0, radiance * cos / np.maximum(pdf.astype(np.float64), 1e-30), 0.0)
-        g.accumulate(nodes, bins, val)
-
     def _initial_data(self, pilot):
         g = self.grid
         g.split_median(pilot["x"].astype(np.float64), self.c, self.max_levels, pilot["n"])
         g.node_count[:] = 0.0
-        self._splat(pilot["x"], pilot["n"], pilot["wi"], pilot["pdf"], pilot["radiance"])
+        g.splat(g.locate(pilot["x"], pilot["n"]), pilot["wi"], pilot["n"], pilot["pdf"], pilot["radiance"])
 
     def _observe_data(self, rec):
         self.grid.splat_records(rec)

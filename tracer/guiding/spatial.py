@@ -415,8 +415,15 @@ class HierarchicalGrid:
 
     def splat_records(self, rec):
         """Each record's radiance |cos| / pdf into its leaf's histogram (the `grid` guide's data)."""
-        _splat_records(rec.node, rec.strategy, rec.wi, rec.n, rec.pdf, rec.radiance, self.n_theta, self.n_phi,
-                       self.data_slot, self.power, self.count, self.node_count)
+        self.splat(rec.node, rec.wi, rec.n, rec.pdf, rec.radiance, rec.strategy)
+
+    def splat(self, nodes, wi, n, pdf, radiance, strategy=None):
+        """splat_records() for vertices given as arrays (leaves `nodes`, -1 for none); strategy < 0
+        marks entries to skip (none by default)."""
+        if strategy is None:
+            strategy = np.zeros(len(nodes), np.int8)
+        _splat_records(nodes, strategy, wi, n, pdf, radiance, self.n_theta, self.n_phi, self.data_slot, self.power,
+                       self.count, self.node_count)
 
     def recycle(self, iteration, after=2):
         """Release the slots of leaves that no camera vertex visited in the last `after` iterations."""
