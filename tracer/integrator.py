@@ -35,7 +35,7 @@ from .camera import camera_ray
 from .film import N_AOV
 from .lights import ENV_NONE, env_pdf, env_radiance, sample_light, triangle_emission, triangle_light_pdf
 from .guiding.spatial import find_voxel, voxel_pdf, voxel_sample
-from .rng import DIM_PIXEL, DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, path_key, uniform
+from .rng import DIM_PIXEL, DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, path_key, split_key, uniform
 from .sampling import dot, frame, power_heuristic, to_local, to_world, triangle_point
 
 MAX_BOUNCES = 4096
@@ -414,11 +414,102 @@ def sanitize(L):
     return bad
 
 
-class WaveBuffers:
-    """Structure-of-arrays path state for waves of up to `size` paths, allocated once."""
+SPLIT_MAX = 8  # copies a path is split into at most
 
-    def __init__(self, size):
+
+@kernel
+def split_counts(active, prim, beta, depth, threshold):
+    """Copies each entry's path continues as: min(ceil(max beta), SPLIT_MAX) where the path hit a
+    surface after its first bounce with throughput above `threshold`, else 1."""
+    n = active.shape[0]
+    ks = np.ones(n, np.int64)
+    for k in prange(n):
+        i = active[k]
+        if prim[k] < 0 or depth[i] < 1:
+            continue
+        bm = max(beta[i, 0], max(beta[i, 1], beta[i, 2]))
+        if bm > threshold:
+            ks[k] = min(int(math.ceil(bm)), SPLIT_MAX)
+    return ks
+
+
+@jit
+def split_paths(active, ks, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d, beta, gain, L, depth, prev_pdf,
+                prev_delta, key, pix, prev_rec, parent, n_slots):
+    """Entry k's path becomes ks[k] copies with beta / ks[k] and gain / ks[k] each (so Russian
+    roulette, which looks at beta / gain, treats them as it would the path). Copies take path
+    slots from n_slots on and entries after the active ones, with the entry's ray and hit (t, prim,
+    b1, b2 of the active entries, copied into t2, prim2, b12, b22, which have room for the copies),
+    L = 0, a key of their own, and parent = the path whose sample they add to. Sequential: slots are handed out in
+    order, so a render does not depend on the thread count."""
+    n_active = ks.shape[0]
+    e = n_active
+    s = n_slots
+    for k in range(n_active):
+        t2[k] = t[k]
+        prim2[k] = prim[k]
+        b12[k] = b1[k]
+        b22[k] = b2[k]
+    for k in range(n_active):
+        m = ks[k]
+        if m <= 1:
+            continue
+        i = active[k]
+        for c in range(3):
+            beta[i, c] /= m
+        gain[i] /= m
+        for j in range(1, m):
+            active[e] = s
+            t2[e] = t[k]
+            prim2[e] = prim[k]
+            b12[e] = b1[k]
+            b22[e] = b2[k]
+            for c in range(3):
+                ray_o[e, c] = ray_o[k, c]
+                ray_d[e, c] = ray_d[k, c]
+                beta[s, c] = beta[i, c]
+                L[s, c] = 0.0
+            gain[s] = gain[i]
+            depth[s] = depth[i]
+            prev_pdf[s] = prev_pdf[i]
+            prev_delta[s] = prev_delta[i]
+            key[s] = split_key(key[i], depth[i], j)
+            pix[s] = pix[i]
+            prev_rec[s] = -1
+            parent[s] = i
+            e += 1
+            s += 1
+
+
+@jit
+def merge_copies(L, parent, n, n_slots):
+    """Add the radiance of copies (slots n .. n_slots - 1) into the paths they were split from, the
+    latest first (a copy may be the parent of a later one)."""
+    for j in range(n_slots - 1, n - 1, -1):
+        p = parent[j]
+        for c in range(3):
+            L[p, c] += L[j, c]
+
+
+def warm_up_splitting():
+    """Compile (or load from the cache) the splitting kernels on a tiny wave."""
+    buf = WaveBuffers(1, split=True)
+    ks = split_counts(np.zeros(1, np.int64), np.zeros(1, np.int32), buf.beta, buf.depth, 1.0)
+    e = (np.zeros(1), np.zeros(1, np.int32), np.zeros(1), np.zeros(1))
+    split_paths(buf.active, ks, *e, *e, buf.ray_o, buf.ray_d, buf.beta, buf.gain, buf.L, buf.depth, buf.prev_pdf,
+                buf.prev_delta, buf.key, buf.pix, buf.prev_rec, buf.parent, 1)
+    merge_copies(buf.L, buf.parent, 1, 1)
+
+
+class WaveBuffers:
+    """Structure-of-arrays path state for waves of up to `size` paths, allocated once; with `split`,
+    room for as many copies again (trace_wave's `split`)."""
+
+    def __init__(self, size, split=False):
         self.size = size
+        size = 2 * size if split else size
+        self.capacity = size
+        self.parent = np.zeros(size if split else 1, np.int64)
         z3 = lambda: np.zeros((size, 3))  # noqa: E731
         self.pix = np.zeros(size, np.int64)
         self.key = np.zeros(size, np.uint64)
@@ -446,7 +537,7 @@ class WaveBuffers:
 class Stats:
     """Wall time per stage and ray counts."""
 
-    STAGES = ("camera", "intersect", "shade", "occluded", "compact", "film", "record")
+    STAGES = ("camera", "intersect", "split", "shade", "occluded", "compact", "film", "record")
 
     def __init__(self):
         self.time = {s: 0.0 for s in self.STAGES}
@@ -454,6 +545,7 @@ class Stats:
         self.shadow_rays = 0
         self.samples = 0
         self.nonfinite = 0
+        self.split_copies = 0
 
     def tick(self, stage, t0):
         t1 = time.perf_counter()
@@ -461,10 +553,19 @@ class Stats:
         return t1
 
 
-def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True):
+def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True, split=0.0):
     """Trace paths g0 .. g0+n-1 of the pass that starts at sample index sample0; add to film.
     ctx.guide_state steers the sampling; `observe(records)`, if given, gets the wave's vertices,
-    whose radiance includes the emission their direction hits directly only if `direct`."""
+    whose radiance includes the emission their direction hits directly only if `direct`.
+
+    split > 0 (a buffer made with split=True; not while recording): a path that reaches a surface
+    after its first bounce with throughput (max channel) above `split` goes on as k = min(ceil(max
+    beta), SPLIT_MAX) copies of throughput beta / k, each sampling its own rest of the path; their
+    radiance adds up to the path's one sample. A guide makes such overweight paths: its mixture
+    weighs a BSDF-sampled direction p_bsdf / p_mixture, up to 1 / a, where the map is thin, and
+    these factors multiply along the path (BSDF sampling alone keeps beta <= 1 / 0.95). Splitting
+    only where the wave buffer has room: whether a path splits never depends on its own future, so
+    the estimate stays unbiased."""
     scene, accel, lights = ctx.scene, ctx.accel, ctx.lights
     t0 = time.perf_counter()
     init_paths(ctx.cam, scene.width, scene.height, ctx.crop, ctx.jitter, ctx.seed, sample0, g0, buf.pix[:n], buf.key[:n],
@@ -478,6 +579,8 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True)
     record = 0 if observe is None else (1 if direct else 2)
     rec = buf.records
     n_rec = 0
+    n_slots = n
+    split = split if (split > 0.0 and record == 0 and buf.capacity > buf.size) else 0.0
     t0 = stats.tick("camera", t0)
     for _ in range(MAX_BOUNCES + 1):
         if n_active == 0:
@@ -486,6 +589,20 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True)
         t, prim, b1, b2 = accel.intersect(ro, rd)
         stats.rays += n_active
         t0 = stats.tick("intersect", t0)
+        if split > 0.0:
+            ks = split_counts(active[:n_active], prim, buf.beta, buf.depth, split)
+            extra = int(ks.sum()) - n_active
+            if 0 < extra and n_slots + extra <= buf.capacity and n_active + extra <= buf.capacity:
+                hit2 = tuple(np.empty(n_active + extra, a.dtype) for a in (t, prim, b1, b2))
+                split_paths(active, ks, t, prim, b1, b2, *hit2, buf.ray_o, buf.ray_d, buf.beta, buf.gain, buf.L,
+                            buf.depth, buf.prev_pdf, buf.prev_delta, buf.key, buf.pix, buf.prev_rec, buf.parent,
+                            n_slots)
+                t, prim, b1, b2 = hit2
+                n_slots += extra
+                n_active += extra
+                stats.split_copies += extra
+                ro, rd = buf.ray_o[:n_active], buf.ray_d[:n_active]
+            t0 = stats.tick("split", t0)
         if record > 0 and n_rec + n_active > rec.strategy.shape[0]:
             rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
         shade(active[:n_active], ro, rd, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
@@ -507,6 +624,8 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True)
         if record > 0:
             n_rec += n_active
         n_active = n_next
+    if n_slots > n:
+        merge_copies(buf.L, buf.parent, n, n_slots)
     stats.nonfinite += sanitize(buf.L[:n])
     if record > 0 and n_rec:
         head = rec.head(n_rec)

@@ -20,7 +20,7 @@ from .errors import SettingsError, unknown_name
 from .film import Film
 from .guiding import make_guide, warm_up_guides
 from .guiding.spatial import empty_state
-from .integrator import Stats, WaveBuffers, trace_wave
+from .integrator import Stats, WaveBuffers, trace_wave, warm_up_splitting
 from .lights import build_lights
 
 DEFAULT_WAVE = 1 << 16
@@ -144,15 +144,18 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     # that neither the time budget nor the stats count Numba's compile.
     t0 = _time.perf_counter()
     trace_wave(ctx, WaveBuffers(1), Film(crop[2], crop[3]), 0, 0, 1, Stats(), observe=lambda rec: None)
+    split = float(getattr(g, "split", 0.0) or 0.0) if g is not None else 0.0
     if g is not None:
         warm_up_guides(ctx)
+    if split > 0.0:
+        warm_up_splitting()
     t_compile = _time.perf_counter() - t0
     t_start = _time.perf_counter() - t_setup  # the budget counts the scene set-up, not the compile
     npix = ctx.n_pixels
     if g is not None:
         g.prepare(scene, ctx)
         ctx.guide_state = g.state()
-    buf = WaveBuffers(min(wave_size, npix * (spp if time is None else 1024)))
+    buf = WaveBuffers(min(wave_size, npix * (spp if time is None else 1024)), split=split > 0.0)
     stats = Stats()
     passes = []
     films = []  # (film, kind) of every pass group: "pilot", "train", "final"
@@ -177,7 +180,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
         for g0 in range(0, total, buf.size):
             n = min(buf.size, total - g0)
             trace_wave(ctx, buf, film, state["sample0"], g0, n, stats, observe=g.observe if learn else None,
-                       direct=getattr(g, "learn_direct", True))
+                       direct=getattr(g, "learn_direct", True), split=split)
             if bar is not None:
                 bar.update(n / npix)
         state["sample0"] += pass_spp
@@ -306,6 +309,7 @@ def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile, gu
         "msamples_per_s": samples / elapsed / 1e6 if elapsed > 0 else 0.0,
         "mrays_per_s": rays / elapsed / 1e6 if elapsed > 0 else 0.0,
         "nonfinite_samples": int(stats.nonfinite),
+        "split_copies": int(stats.split_copies),
         **settings,
         "guide_memory_bytes": int(guide.peak_memory) if guide is not None else 0,
         "guide_time_learning": float(guide.time_learning) if guide is not None else 0.0,

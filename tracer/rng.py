@@ -17,6 +17,8 @@ The dimension layout is this table, and nothing else in the code hard-codes a di
     BOUNCE + B*k + 7          bounce k: Russian roulette
 
 with BOUNCE = 2 and B = 8; bounce k = 0 is the first surface the camera ray hits.
+A path split into copies at bounce k (tracer.integrator, `split`) keeps its key; copy j >= 1
+takes `split_key(key, k, j)`, a fresh key that draws the same table from bounce k on.
 
 Photons (light paths traced to feed guides) have their own keys, `photon_key(seed, iteration,
 index)`, which no camera path shares, and their own table:
@@ -92,6 +94,12 @@ def uniform(key, dim):
 def bounce_dim(depth, slot):
     """Dimension of `slot` (DIR, LOBE, ...) at bounce `depth` (0 = first hit)."""
     return BOUNCE + BLOCK * depth + slot
+
+
+@jit
+def split_key(key, bounce, copy):
+    """The key of copy `copy` (>= 1) of a path split at bounce `bounce`."""
+    return mix64(key ^ ((np.uint64(bounce) + np.uint64(1)) * _M2 + np.uint64(copy) * _GOLDEN))
 
 
 @jit

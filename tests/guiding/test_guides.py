@@ -21,7 +21,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 GUIDES = [g for g in guide_names() if g != "bsdf"]
 # every guide at its defaults (mixing weights of least second moment), and the paper's eq. 14
 # weights (which change how often each strategy is drawn, so they must leave the mean alone too)
-VARIANTS = [(g, {}) for g in GUIDES] + [("photon", {"mixing": "eq14"}), ("photon", {"light_guiding": 0.5})]
+# and paths split where they become overweight (split 1.5: often, so that the test sees it)
+VARIANTS = [(g, {}) for g in GUIDES] + [("photon", {"mixing": "eq14"}), ("photon", {"light_guiding": 0.5}),
+                                        ("photon", {"split": 1.5})]
 CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96)]
 N_TESTS = len(CASES) * len(VARIANTS) * 3
 
@@ -48,6 +50,8 @@ def test_guided_mean_equals_bsdf_mean(case, variant, bsdf_renders):
     assert st["voxels_with_map"] > 0, "the guide never built a map: this test would not test guiding"
     kinds = [p["kind"] for p in r.stats["passes"]]
     assert kinds[0] == "pilot" and "train" in kinds and kinds[-1] == "final"
+    if opts.get("split"):
+        assert r.stats["split_copies"] > 0, "no path was split: this test would not test splitting"
     m_g, v_g = image_mean(r)
     m_b, v_b = image_mean(bsdf_renders[name])
     assert_z(m_g, v_g + v_b, m_b, n_tests=N_TESTS, what=f"{guide} on {name} vs bsdf")
@@ -246,3 +250,34 @@ def test_guided_light_tracing_keeps_the_expected_photon_power_per_voxel():
     mu, mg = pu[:, top].mean(0), pg[:, top].mean(0)
     var = pu[:, top].var(0, ddof=1) / batches + pg[:, top].var(0, ddof=1) / batches
     assert_z(mg, var, mu, n_tests=top.size, what="guided vs unguided photon power per voxel")
+
+
+def test_splitting_keeps_one_sample_per_path_and_is_off_while_recording():
+    """Copies add into their path's sample: the film counts spp samples per pixel, the stats count
+    the copies; without `split`, or in a wave whose vertices a guide records, nothing splits."""
+    from tracer.film import Film
+
+    name, w, h, _ = CASES[1]
+    scene = _scene(name, w, h)
+    g = make_guide("photon", iterations=3)
+    tracer.render(scene, spp=16, guide=g, seed=5)
+    frozen = FrozenGuide(g)
+    off = tracer.render(scene, spp=8, guide=frozen, seed=6)
+    frozen.split = 1.0
+    on = tracer.render(scene, spp=8, guide=frozen, seed=6)
+    assert off.stats["split_copies"] == 0 and on.stats["split_copies"] > 0
+    assert (on.film.count == 8).all() and (off.film.count == 8).all()
+    assert on.stats["camera_and_bounce_rays"] > off.stats["camera_and_bounce_rays"]
+    ctx = g.ctx
+    ctx.guide_state = g.state()
+    n = w * h * 8
+    for observe, copies in ((None, True), (lambda rec: None, False)):
+        st = Stats()
+        trace_wave(ctx, WaveBuffers(n, split=True), Film(w, h), 0, 0, n, st, observe=observe, split=1.0)
+        assert (st.split_copies > 0) == copies
+
+
+@pytest.mark.parametrize("bad", [0.5, -1.0, "2"])
+def test_split_setting_is_checked(bad):
+    with pytest.raises(SettingsError, match="split"):
+        make_guide("photon", split=bad)

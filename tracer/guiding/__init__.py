@@ -91,6 +91,7 @@ class FrozenGuide:
             raise SettingsError("FrozenGuide needs a guide that has learned (render with it first)")
         self.guide = guide
         self.name = guide.name + " (frozen)"
+        self.split = getattr(guide, "split", 0.0)
         self._state = guide.state()
         self.peak_memory = guide.memory_bytes()
         self.time_learning = self.time_inference = 0.0

@@ -79,6 +79,7 @@ COMMON = {
     "mixing": "variance",  # variance: least second moment; eq14: the paper's mean-contribution ratio
     "train_budget": 0.25,  # with a time budget: pilot and training iterations end within this share of it
     "normal_classes": 6,  # 6: a voxel keeps one map per side of its surfaces (see below); 1: one map
+    "split": 0.0,  # > 0: final passes split paths whose throughput exceeds this (integrator.trace_wave); 0: off
 }
 MIXING = ("eq14", "variance")
 N_ALPHA = 7  # candidate mixing weights of `mixing variance`, evenly spaced over [alpha_min, alpha_max]
@@ -174,6 +175,9 @@ class HistogramGuide:
         self.q_thr = _float("mis_min_samples", s["mis_min_samples"], 1.0)
         self.max_levels = _int("max_levels", s["max_levels"], 0)
         self.train_budget = _float("train_budget", s["train_budget"], 0.0, 1.0)
+        self.split = _float("split", s["split"], 0.0)
+        if 0.0 < self.split < 1.0:
+            raise SettingsError(f"guide setting split must be 0 (off) or at least 1, got {s['split']!r}")
         self.learn_direct = bool(_int("direct", s["direct"], 0))
         if s["direct"] not in (0, 1):
             raise SettingsError(f"guide setting direct must be 0 or 1, got {s['direct']!r}")
