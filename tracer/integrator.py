@@ -418,13 +418,13 @@ SPLIT_MAX = 8  # copies a path is split into at most
 
 
 @kernel
-def split_counts(active, prim, beta, depth, threshold):
-    """Copies each entry's path continues as: min(ceil(max beta), SPLIT_MAX) where the path hit a
+def split_counts(active, prim, beta, depth, threshold, ks):
+    """ks[k]: copies entry k's path continues as: min(ceil(max beta), SPLIT_MAX) where the path hit a
     surface after its first bounce with throughput above `threshold`, else 1."""
     n = active.shape[0]
-    ks = np.ones(n, np.int64)
     for k in prange(n):
         i = active[k]
+        ks[k] = 1
         if prim[k] < 0 or depth[i] < 1:
             continue
         bm = max(beta[i, 0], max(beta[i, 1], beta[i, 2]))
@@ -494,7 +494,8 @@ def merge_copies(L, parent, n, n_slots):
 def warm_up_splitting():
     """Compile (or load from the cache) the splitting kernels on a tiny wave."""
     buf = WaveBuffers(1, split=True)
-    ks = split_counts(np.zeros(1, np.int64), np.zeros(1, np.int32), buf.beta, buf.depth, 1.0)
+    ks = buf.ks[:1]
+    split_counts(np.zeros(1, np.int64), np.zeros(1, np.int32), buf.beta, buf.depth, 1.0, ks)
     e = (np.zeros(1), np.zeros(1, np.int32), np.zeros(1), np.zeros(1))
     split_paths(buf.active, ks, *e, *e, buf.ray_o, buf.ray_d, buf.beta, buf.gain, buf.L, buf.depth, buf.prev_pdf,
                 buf.prev_delta, buf.key, buf.pix, buf.prev_rec, buf.parent, 1)
@@ -509,7 +510,8 @@ class WaveBuffers:
         self.size = size
         size = 2 * size if split else size
         self.capacity = size
-        self.parent = np.zeros(size if split else 1, np.int64)
+        self.parent = np.zeros(size if split else 1, np.int64)  # path a copy adds into
+        self.ks = np.zeros(size if split else 1, np.int64)  # copies per entry, in a bounce that splits
         z3 = lambda: np.zeros((size, 3))  # noqa: E731
         self.pix = np.zeros(size, np.int64)
         self.key = np.zeros(size, np.uint64)
@@ -590,7 +592,8 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True,
         stats.rays += n_active
         t0 = stats.tick("intersect", t0)
         if split > 0.0:
-            ks = split_counts(active[:n_active], prim, buf.beta, buf.depth, split)
+            ks = buf.ks[:n_active]
+            split_counts(active[:n_active], prim, buf.beta, buf.depth, split, ks)
             extra = int(ks.sum()) - n_active
             if 0 < extra and n_slots + extra <= buf.capacity and n_active + extra <= buf.capacity:
                 hit2 = tuple(np.empty(n_active + extra, a.dtype) for a in (t, prim, b1, b2))
