@@ -415,43 +415,85 @@ def sanitize(L):
 
 
 SPLIT_MAX = 8  # copies a path is split into at most
+WINDOW_MIN_SURVIVAL = 0.05  # the weight window's roulette keeps a path with at least this probability
 
 
 @kernel
-def split_counts(active, prim, beta, depth, threshold, ks):
-    """ks[k]: copies entry k's path continues as: min(ceil(max beta), SPLIT_MAX) where the path hit a
-    surface after its first bounce with throughput above `threshold`, else 1."""
+def split_counts(active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing, pixel_est,
+                 hi, low, threshold, ks):
+    """ks[k]: how many copies entry k's path goes on as (0: it ends here), for a path that hit a
+    surface after its first bounce; 1 elsewhere.
+
+    Weight window (hi > 0), where the guide's voxel has an outgoing radiance estimate Lo: the path's
+    expected share of its pixel is q = lum(beta) Lo / I (I = pixel_est of its pixel). Above hi it
+    splits into min(ceil(q / hi), SPLIT_MAX) copies; below low it survives a roulette with probability
+    max(q / low, WINDOW_MIN_SURVIVAL), its beta and gain divided by that (here, in place). Elsewhere
+    (no window, or no estimate): throughput splitting, min(ceil(max beta), SPLIT_MAX) copies where
+    max beta > threshold > 0."""
     n = active.shape[0]
     for k in prange(n):
         i = active[k]
         ks[k] = 1
-        if prim[k] < 0 or depth[i] < 1:
+        p = prim[k]
+        if p < 0 or depth[i] < 1:
             continue
-        bm = max(beta[i, 0], max(beta[i, 1], beta[i, 2]))
-        if bm > threshold:
-            ks[k] = min(int(math.ceil(bm)), SPLIT_MAX)
+        if hi > 0.0:
+            x = triangle_point(tri, p, b1[k], b2[k])
+            ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])
+            arriving = -(ray_d[k, 0] * ng[0] + ray_d[k, 1] * ng[1] + ray_d[k, 2] * ng[2]) >= 0.0
+            nf = ng if arriving else (-ng[0], -ng[1], -ng[2])
+            node = find_voxel(gs, x, nf)
+            if node >= 0 and outgoing[node] > 0.0:
+                q = (0.2126 * beta[i, 0] + 0.7152 * beta[i, 1] + 0.0722 * beta[i, 2]) * outgoing[node] / pixel_est[pix[i]]
+                if q > hi:
+                    ks[k] = min(int(math.ceil(q / hi)), SPLIT_MAX)
+                elif q < low:
+                    ps = max(q / low, WINDOW_MIN_SURVIVAL)
+                    if uniform(split_key(key[i], depth[i], 0), 0) >= ps:
+                        ks[k] = 0
+                    else:
+                        for c in range(3):
+                            beta[i, c] /= ps
+                        gain[i] /= ps
+                continue
+        if threshold > 0.0:
+            bm = max(beta[i, 0], max(beta[i, 1], beta[i, 2]))
+            if bm > threshold:
+                ks[k] = min(int(math.ceil(bm)), SPLIT_MAX)
     return ks
 
 
 @jit
 def split_paths(active, ks, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d, beta, gain, L, depth, prev_pdf,
-                prev_delta, key, pix, prev_rec, parent, n_slots):
-    """Entry k's path becomes ks[k] copies with beta / ks[k] and gain / ks[k] each (so Russian
-    roulette, which looks at beta / gain, treats them as it would the path). Copies take path
-    slots from n_slots on and entries after the active ones, with the entry's ray and hit (t, prim,
-    b1, b2 of the active entries, copied into t2, prim2, b12, b22, which have room for the copies),
-    L = 0, a key of their own, and parent = the path whose sample they add to. Sequential: slots are handed out in
-    order, so a render does not depend on the thread count."""
+                prev_delta, key, pix, prev_rec, parent, n_slots, capacity):
+    """Apply split_counts: entries with ks 0 leave the wave (their paths end; what they gathered
+    stays in L); entry k's path becomes ks[k] copies with beta / ks[k] and gain / ks[k] each (so
+    Russian roulette, which looks at beta / gain, treats them as it would the path), fewer where
+    fewer than ks[k] - 1 path slots or wave entries are left below `capacity`. The kept entries'
+    rays and hits (t, prim, b1, b2 into t2, prim2, b12, b22, which have room for the copies) move
+    to the front; copies take path slots from n_slots on and the entries after the kept ones, with
+    the entry's ray and hit, L = 0, a key of their own, and parent = the path whose sample they add
+    to. Returns (entries, path slots) in use. Sequential: slots are handed out in order, so a render
+    does not depend on the thread count."""
     n_active = ks.shape[0]
-    e = n_active
+    e = 0
+    for k in range(n_active):
+        if ks[k] == 0:
+            continue
+        active[e] = active[k]
+        ks[e] = ks[k]
+        t2[e] = t[k]
+        prim2[e] = prim[k]
+        b12[e] = b1[k]
+        b22[e] = b2[k]
+        for c in range(3):
+            ray_o[e, c] = ray_o[k, c]
+            ray_d[e, c] = ray_d[k, c]
+        e += 1
+    kept = e
     s = n_slots
-    for k in range(n_active):
-        t2[k] = t[k]
-        prim2[k] = prim[k]
-        b12[k] = b1[k]
-        b22[k] = b2[k]
-    for k in range(n_active):
-        m = ks[k]
+    for k in range(kept):
+        m = min(ks[k], capacity - s + 1, capacity - e + 1)
         if m <= 1:
             continue
         i = active[k]
@@ -460,10 +502,10 @@ def split_paths(active, ks, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d, 
         gain[i] /= m
         for j in range(1, m):
             active[e] = s
-            t2[e] = t[k]
-            prim2[e] = prim[k]
-            b12[e] = b1[k]
-            b22[e] = b2[k]
+            t2[e] = t2[k]
+            prim2[e] = prim2[k]
+            b12[e] = b12[k]
+            b22[e] = b22[k]
             for c in range(3):
                 ray_o[e, c] = ray_o[k, c]
                 ray_d[e, c] = ray_d[k, c]
@@ -479,6 +521,7 @@ def split_paths(active, ks, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d, 
             parent[s] = i
             e += 1
             s += 1
+    return e, s
 
 
 @jit
@@ -491,14 +534,15 @@ def merge_copies(L, parent, n, n_slots):
             L[p, c] += L[j, c]
 
 
-def warm_up_splitting():
-    """Compile (or load from the cache) the splitting kernels on a tiny wave."""
+def warm_up_splitting(ctx):
+    """Compile (or load from the cache) the splitting kernels on a tiny wave of ctx's scene."""
     buf = WaveBuffers(1, split=True)
     ks = buf.ks[:1]
-    split_counts(np.zeros(1, np.int64), np.zeros(1, np.int32), buf.beta, buf.depth, 1.0, ks)
-    e = (np.zeros(1), np.zeros(1, np.int32), np.zeros(1), np.zeros(1))
+    e = (np.zeros(1), np.full(1, -1, np.int32), np.zeros(1), np.zeros(1))
+    split_counts(buf.active[:1], buf.ray_d[:1], e[1], e[2], e[3], ctx.scene.tri, ctx.tri_normal, buf.beta, buf.gain,
+                 buf.depth, buf.pix, buf.key, ctx.guide_state, np.zeros(1), np.ones(1), 1.0, 0.1, 1.0, ks)
     split_paths(buf.active, ks, *e, *e, buf.ray_o, buf.ray_d, buf.beta, buf.gain, buf.L, buf.depth, buf.prev_pdf,
-                buf.prev_delta, buf.key, buf.pix, buf.prev_rec, buf.parent, 1)
+                buf.prev_delta, buf.key, buf.pix, buf.prev_rec, buf.parent, 1, buf.capacity)
     merge_copies(buf.L, buf.parent, 1, 1)
 
 
@@ -548,6 +592,7 @@ class Stats:
         self.samples = 0
         self.nonfinite = 0
         self.split_copies = 0
+        self.window_ended = 0
 
     def tick(self, stage, t0):
         t1 = time.perf_counter()
@@ -560,14 +605,21 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True,
     ctx.guide_state steers the sampling; `observe(records)`, if given, gets the wave's vertices,
     whose radiance includes the emission their direction hits directly only if `direct`.
 
-    split > 0 (a buffer made with split=True; not while recording): a path that reaches a surface
-    after its first bounce with throughput (max channel) above `split` goes on as k = min(ceil(max
-    beta), SPLIT_MAX) copies of throughput beta / k, each sampling its own rest of the path; their
-    radiance adds up to the path's one sample. A guide makes such overweight paths: its mixture
-    weighs a BSDF-sampled direction p_bsdf / p_mixture, up to 1 / a, where the map is thin, and
-    these factors multiply along the path (BSDF sampling alone keeps beta <= 1 / 0.95). Splitting
-    only where the wave buffer has room: whether a path splits never depends on its own future, so
-    the estimate stays unbiased."""
+    Splitting and the weight window (a buffer made with split=True; not while recording). A guide
+    makes overweight paths: its mixture weighs a BSDF-sampled direction p_bsdf / p_mixture, up to
+    1 / a, where the map is thin, and these factors multiply along the path (BSDF sampling alone
+    keeps beta <= 1 / 0.95). At each surface hit after the first bounce (split_counts):
+    - ctx.window = (outgoing, pixel_est, hi, low), or None: a weight window after adjoint-driven
+      Russian roulette and splitting (Vorba and Krivanek 2016), where the guide's voxel has an
+      estimate `outgoing` of the radiance a path arriving there goes on to collect. The path's
+      expected share of its pixel's value pixel_est is q = lum(beta) outgoing / pixel_est: above hi
+      it splits into ceil(q / hi) copies (SPLIT_MAX at most), below low it is rouletted.
+    - split > 0, where there is no window estimate: a path whose throughput (max channel) exceeds
+      `split` goes on as min(ceil(max beta), SPLIT_MAX) copies.
+    A path split into k copies gives each throughput beta / k and its own key; each samples its own
+    rest of the path, and their radiance adds up to the path's one sample. Copies are made only
+    where the wave buffer has room. Whether a path splits or survives never depends on its own
+    future, so the estimate stays unbiased."""
     scene, accel, lights = ctx.scene, ctx.accel, ctx.lights
     t0 = time.perf_counter()
     init_paths(ctx.cam, scene.width, scene.height, ctx.crop, ctx.jitter, ctx.seed, sample0, g0, buf.pix[:n], buf.key[:n],
@@ -582,7 +634,9 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True,
     rec = buf.records
     n_rec = 0
     n_slots = n
-    split = split if (split > 0.0 and record == 0 and buf.capacity > buf.size) else 0.0
+    window = getattr(ctx, "window", None)
+    splitting = (split > 0.0 or window is not None) and record == 0 and buf.capacity > buf.size
+    outgoing, pixel_est, hi, low = window if window is not None else (np.zeros(1), np.ones(1), 0.0, 0.0)
     t0 = stats.tick("camera", t0)
     for _ in range(MAX_BOUNCES + 1):
         if n_active == 0:
@@ -591,19 +645,21 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True,
         t, prim, b1, b2 = accel.intersect(ro, rd)
         stats.rays += n_active
         t0 = stats.tick("intersect", t0)
-        if split > 0.0:
+        if splitting:
             ks = buf.ks[:n_active]
-            split_counts(active[:n_active], prim, buf.beta, buf.depth, split, ks)
-            extra = int(ks.sum()) - n_active
-            if 0 < extra and n_slots + extra <= buf.capacity and n_active + extra <= buf.capacity:
-                hit2 = tuple(np.empty(n_active + extra, a.dtype) for a in (t, prim, b1, b2))
-                split_paths(active, ks, t, prim, b1, b2, *hit2, buf.ray_o, buf.ray_d, buf.beta, buf.gain, buf.L,
-                            buf.depth, buf.prev_pdf, buf.prev_delta, buf.key, buf.pix, buf.prev_rec, buf.parent,
-                            n_slots)
+            split_counts(active[:n_active], rd, prim, b1, b2, scene.tri, ctx.tri_normal, buf.beta, buf.gain,
+                         buf.depth, buf.pix, buf.key, gs, outgoing, pixel_est, hi, low, split, ks)
+            wanted = int(ks.sum())
+            ended = int(np.count_nonzero(ks == 0))
+            if wanted > n_active or ended > 0:
+                hit2 = tuple(np.empty(min(wanted, buf.capacity), a.dtype) for a in (t, prim, b1, b2))
+                n_e, n_s = split_paths(active, ks, t, prim, b1, b2, *hit2, buf.ray_o, buf.ray_d, buf.beta, buf.gain,
+                                   buf.L, buf.depth, buf.prev_pdf, buf.prev_delta, buf.key, buf.pix, buf.prev_rec,
+                                   buf.parent, n_slots, buf.capacity)
+                stats.split_copies += n_s - n_slots
+                stats.window_ended += ended
+                n_slots, n_active = n_s, n_e
                 t, prim, b1, b2 = hit2
-                n_slots += extra
-                n_active += extra
-                stats.split_copies += extra
                 ro, rd = buf.ray_o[:n_active], buf.ray_d[:n_active]
             t0 = stats.tick("split", t0)
         if record > 0 and n_rec + n_active > rec.strategy.shape[0]:

@@ -145,17 +145,18 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     t0 = _time.perf_counter()
     trace_wave(ctx, WaveBuffers(1), Film(crop[2], crop[3]), 0, 0, 1, Stats(), observe=lambda rec: None)
     split = float(getattr(g, "split", 0.0) or 0.0) if g is not None else 0.0
+    window = float(getattr(g, "window", 0.0) or 0.0) if g is not None else 0.0
     if g is not None:
         warm_up_guides(ctx)
-    if split > 0.0:
-        warm_up_splitting()
+    if split > 0.0 or window > 0.0:
+        warm_up_splitting(ctx)
     t_compile = _time.perf_counter() - t0
     t_start = _time.perf_counter() - t_setup  # the budget counts the scene set-up, not the compile
     npix = ctx.n_pixels
     if g is not None:
         g.prepare(scene, ctx)
         ctx.guide_state = g.state()
-    buf = WaveBuffers(min(wave_size, npix * (spp if time is None else 1024)), split=split > 0.0)
+    buf = WaveBuffers(min(wave_size, npix * (spp if time is None else 1024)), split=split > 0.0 or window > 0.0)
     stats = Stats()
     passes = []
     films = []  # (film, kind) of every pass group: "pilot", "train", "final"
@@ -216,6 +217,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                 films.append((Film(crop[2], crop[3]), "train"))
                 run_pass(films[-1][0], n, "train", True)
         # The final pass(es): the guide frozen; in doubling passes that fit the budget
+        if window > 0.0:
+            ctx.window = _weight_window(g, [f for f, _ in films], crop)
         films.append((final, "final"))
         pass_spp = passes[-1]["spp"] if passes else 1
         first_final = len(passes)
@@ -253,6 +256,33 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
 
 class _Stop(Exception):
     """A callback asked the render to stop."""
+
+
+def _weight_window(g, films, crop):
+    """ctx.window for the final passes (integrator.trace_wave), or None: the guide's per-voxel
+    outgoing radiance, and per pixel a smoothed estimate of its value from the training passes'
+    image (3x3 box filter of its luminance, at least 1% of the image's mean, so that pixels that
+    happened to get no light yet do not ask for every path to split). It becomes the guide's
+    `window_pixels`, which a FrozenGuide made from it uses when no training passes precede its
+    final pass."""
+    outgoing = g.window_estimates() if hasattr(g, "window_estimates") else None
+    if outgoing is None or not (outgoing > 0.0).any():
+        return None
+    w, h = int(crop[2]), int(crop[3])
+    if films and any(f.count.sum() > 0 for f in films):
+        image, _, _ = combine_films(films, ["train"] * len(films))
+        lum = image[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+        lum = np.where(np.isfinite(lum), np.maximum(lum, 0.0), 0.0)
+        padded = np.pad(lum, 1, mode="edge")
+        smooth = sum(padded[1 + dy: 1 + dy + h, 1 + dx: 1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)) / 9.0
+        floor = 0.01 * float(lum.mean())
+        if not floor > 0.0:
+            return None
+        g.window_pixels = np.maximum(smooth, floor).ravel()
+    pixels = getattr(g, "window_pixels", None)
+    if pixels is None or pixels.shape[0] != w * h:
+        return None
+    return (np.ascontiguousarray(outgoing, dtype=np.float64), pixels, float(g.window), float(g.window_low))
 
 
 def combine_films(films, kinds=None):
@@ -310,6 +340,7 @@ def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile, gu
         "mrays_per_s": rays / elapsed / 1e6 if elapsed > 0 else 0.0,
         "nonfinite_samples": int(stats.nonfinite),
         "split_copies": int(stats.split_copies),
+        "window_ended": int(stats.window_ended),
         **settings,
         "guide_memory_bytes": int(guide.peak_memory) if guide is not None else 0,
         "guide_time_learning": float(guide.time_learning) if guide is not None else 0.0,

@@ -21,9 +21,11 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 GUIDES = [g for g in guide_names() if g != "bsdf"]
 # every guide at its defaults (mixing weights of least second moment), and the paper's eq. 14
 # weights (which change how often each strategy is drawn, so they must leave the mean alone too)
-# and paths split where they become overweight (split 1.5: often, so that the test sees it)
+# and paths split where they become overweight (split 1.5: often, so that the test sees it), and a
+# narrow weight window (which splits and roulettes often)
 VARIANTS = [(g, {}) for g in GUIDES] + [("photon", {"mixing": "eq14"}), ("photon", {"light_guiding": 0.5}),
-                                        ("photon", {"split": 1.5})]
+                                        ("photon", {"split": 1.5, "window": 0.0}),
+                                        ("photon", {"window": 1.0, "window_low": 0.5})]
 CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96)]
 N_TESTS = len(CASES) * len(VARIANTS) * 3
 
@@ -50,8 +52,10 @@ def test_guided_mean_equals_bsdf_mean(case, variant, bsdf_renders):
     assert st["voxels_with_map"] > 0, "the guide never built a map: this test would not test guiding"
     kinds = [p["kind"] for p in r.stats["passes"]]
     assert kinds[0] == "pilot" and "train" in kinds and kinds[-1] == "final"
-    if opts.get("split"):
+    if opts.get("split") or opts.get("window"):
         assert r.stats["split_copies"] > 0, "no path was split: this test would not test splitting"
+    if opts.get("window"):
+        assert r.stats["window_ended"] > 0, "the window ended no path: this test would not test its roulette"
     m_g, v_g = image_mean(r)
     m_b, v_b = image_mean(bsdf_renders[name])
     assert_z(m_g, v_g + v_b, m_b, n_tests=N_TESTS, what=f"{guide} on {name} vs bsdf")
@@ -262,11 +266,17 @@ def test_splitting_keeps_one_sample_per_path_and_is_off_while_recording():
     g = make_guide("photon", iterations=3)
     tracer.render(scene, spp=16, guide=g, seed=5)
     frozen = FrozenGuide(g)
+    frozen.split, frozen.window = 0.0, 0.0
     off = tracer.render(scene, spp=8, guide=frozen, seed=6)
     frozen.split = 1.0
     on = tracer.render(scene, spp=8, guide=frozen, seed=6)
+    frozen.split, frozen.window, frozen.window_low = 0.0, 1.0, 0.5
+    win = tracer.render(scene, spp=8, guide=frozen, seed=6)
     assert off.stats["split_copies"] == 0 and on.stats["split_copies"] > 0
-    assert (on.film.count == 8).all() and (off.film.count == 8).all()
+    assert off.stats["window_ended"] == 0 and on.stats["window_ended"] == 0
+    assert win.stats["split_copies"] > 0 and win.stats["window_ended"] > 0
+    for r in (off, on, win):
+        assert (r.film.count == 8).all() and np.isfinite(r.image).all()
     assert on.stats["camera_and_bounce_rays"] > off.stats["camera_and_bounce_rays"]
     ctx = g.ctx
     ctx.guide_state = g.state()
@@ -281,3 +291,39 @@ def test_splitting_keeps_one_sample_per_path_and_is_off_while_recording():
 def test_split_setting_is_checked(bad):
     with pytest.raises(SettingsError, match="split"):
         make_guide("photon", split=bad)
+
+
+@pytest.mark.parametrize("bad", [{"window": -1.0}, {"window": "3"}, {"window": 1.0, "window_low": 1.0},
+                                 {"window_low": -0.1}])
+def test_window_settings_are_checked(bad):
+    with pytest.raises(SettingsError, match="window"):
+        make_guide("photon", **bad)
+
+
+def test_outgoing_radiance_per_voxel_is_the_mean_of_what_arrivals_collected():
+    """A record's vertex sent back what its path's previous record received: per leaf, outgoing()
+    is the mean of those, over leaves with enough of them; halves go to both children on a split."""
+    from tracer.guiding.spatial import OUT_MIN_SAMPLES, HierarchicalGrid
+    from tracer.integrator import Records
+
+    g = HierarchicalGrid(np.zeros(3), np.ones(3), 1, 4, 8, 1)
+    g.visit(np.arange(g.n_cells), 0)
+    rng = np.random.default_rng(3)
+    n = 4 * OUT_MIN_SAMPLES
+    rec = Records.allocate(2 * n)
+    rec.strategy[:] = 0
+    rec.node[:n] = 0  # first vertices: no previous record, so they tell nothing about their voxel
+    rec.radiance[:n] = rng.exponential(size=n).astype(np.float32)
+    rec.node[n:] = 0
+    rec.prev[n:] = np.arange(n)
+    rec.strategy[n + 1] = -1  # not a vertex
+    g.observe_outgoing(rec)
+    keep = np.ones(n, bool)
+    keep[1] = False
+    assert np.isclose(g.outgoing()[0], rec.radiance[:n][keep].mean(), rtol=1e-6)
+    g2 = HierarchicalGrid(np.zeros(3), np.ones(3), 1, 4, 8, 1)
+    g2.visit(np.arange(g2.n_cells), 0)
+    few = rec.head(n + OUT_MIN_SAMPLES - 1)
+    few.prev[n:] = np.arange(OUT_MIN_SAMPLES - 1)
+    g2.observe_outgoing(few)
+    assert g2.outgoing()[0] == 0.0  # too few arrivals: unknown

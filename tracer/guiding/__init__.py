@@ -92,6 +92,10 @@ class FrozenGuide:
         self.guide = guide
         self.name = guide.name + " (frozen)"
         self.split = getattr(guide, "split", 0.0)
+        self.window = getattr(guide, "window", 0.0)
+        self.window_low = getattr(guide, "window_low", 0.0)
+        self.window_pixels = getattr(guide, "window_pixels", None)
+        self._outgoing = guide.window_estimates() if hasattr(guide, "window_estimates") else None
         self._state = guide.state()
         self.peak_memory = guide.memory_bytes()
         self.time_learning = self.time_inference = 0.0
@@ -107,6 +111,9 @@ class FrozenGuide:
 
     def update(self):
         pass
+
+    def window_estimates(self):
+        return self._outgoing
 
     def memory_bytes(self):
         return self.peak_memory

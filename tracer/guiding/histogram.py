@@ -80,6 +80,8 @@ COMMON = {
     "train_budget": 0.25,  # with a time budget: pilot and training iterations end within this share of it
     "normal_classes": 6,  # 6: a voxel keeps one map per side of its surfaces (see below); 1: one map
     "split": 0.0,  # > 0: final passes split paths whose throughput exceeds this (integrator.trace_wave); 0: off
+    "window": 0.0,  # > 0: final passes' weight window splits paths expected to bring more than this x their pixel
+    "window_low": 0.2,  # ... and rouletted those expected to bring less than this x their pixel
 }
 MIXING = ("eq14", "variance")
 N_ALPHA = 7  # candidate mixing weights of `mixing variance`, evenly spaced over [alpha_min, alpha_max]
@@ -178,6 +180,12 @@ class HistogramGuide:
         self.split = _float("split", s["split"], 0.0)
         if 0.0 < self.split < 1.0:
             raise SettingsError(f"guide setting split must be 0 (off) or at least 1, got {s['split']!r}")
+        self.window = _float("window", s["window"], 0.0)
+        self.window_low = _float("window_low", s["window_low"], 0.0)
+        if self.window > 0.0 and not self.window_low < self.window:
+            raise SettingsError(f"guide setting window_low ({s['window_low']!r}) must be below window "
+                                f"({s['window']!r})")
+        self.window_pixels = None  # set by the render (render._weight_window)
         self.learn_direct = bool(_int("direct", s["direct"], 0))
         if s["direct"] not in (0, 1):
             raise SettingsError(f"guide setting direct must be 0 or 1, got {s['direct']!r}")
@@ -224,6 +232,8 @@ class HistogramGuide:
             g = self.grid
             self.info["vertices"] += g.visit_records(rec, self.iteration)
             _mis_stats(rec.node, rec.strategy, rec.radiance, rec.fcos, g.mis_sum, g.mis_n)
+            if self.window > 0.0:
+                g.observe_outgoing(rec)
             if self.mixing == "variance":
                 if self._mom is None or self._mom.shape[0] < g.alpha.shape[0]:
                     self._mom = np.zeros((g.alpha.shape[0], N_ALPHA))
@@ -265,6 +275,11 @@ class HistogramGuide:
         g.visit(np.arange(g.n_cells), 0)
         g.set_maps(g.data_slot[: g.n_cells], build_tables(np.repeat(m[None], g.n_cells, axis=0)))
         return g.state()
+
+    def window_estimates(self):
+        """Per tree node, the outgoing radiance of the weight window (HierarchicalGrid.outgoing);
+        None before there is a grid."""
+        return self.grid.outgoing() if self.grid is not None else None
 
     def memory_bytes(self):
         return self.grid.memory_bytes() if self.grid is not None else 0
@@ -401,7 +416,8 @@ class PhotonGuide(HistogramGuide):
     # a 10 s budget trains) they were far worse (0.89x against 0.33x: the median map held 283
     # photons), and at equal time ajar went 0.59 / 0.51 / 0.45 / 0.43x -> 0.81 / 0.75 / 0.43 / 0.40x
     # at 10 / 20 / 40 / 80 s. A per-map blur widened where photons are few did not rescue it.
-    DEFAULTS = dict(COMMON, split_c=4000.0, sigma=1.0, photons_per_pixel=2.0, light_guiding=0.0)
+    DEFAULTS = dict(COMMON, split_c=4000.0, sigma=1.0, photons_per_pixel=2.0, light_guiding=0.0, split=2.0, window=3.0,
+                    window_low=0.05)
 
     def __init__(self, **settings):
         super().__init__(**settings)

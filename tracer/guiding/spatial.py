@@ -66,6 +66,20 @@ def normal_class(n_class, n):
     return 2 * ax + (1 if n[ax] < 0.0 else 0)
 
 
+OUT_MIN_SAMPLES = 8  # camera vertices a leaf needs before outgoing() trusts its mean
+
+
+@jit
+def _outgoing_stats(node, strategy, prev, radiance, out_sum, out_n):
+    for r in range(node.shape[0]):
+        nd = node[r]
+        p = prev[r]
+        if nd < 0 or strategy[r] < 0 or p < 0:
+            continue
+        out_sum[nd] += radiance[p]
+        out_n[nd] += 1.0
+
+
 @jit(inline="always")
 def find_voxel(gs, x, n):
     """Leaf node holding point x on a surface whose side facing the arriving path or photon has
@@ -268,6 +282,8 @@ class HierarchicalGrid:
         self.alpha = np.full(cap, 0.5)
         self.mis_sum = np.zeros((cap, 2))  # sum of L_b per strategy (0 BSDF, 1 guide), eq. 14
         self.mis_n = np.zeros((cap, 2))
+        self.out_sum = np.zeros(cap)  # sum of camera paths' outgoing radiance at the leaf (luminance)
+        self.out_n = np.zeros(cap)  # how many of them (see outgoing())
         self.data_slot = np.full(cap, -1, np.int32)  # histogram slot of a leaf
         self.map_ok = np.zeros(cap, np.bool_)  # the slot's CDF is usable
         self.imap_ok = np.zeros(cap, np.bool_)  # the slot's importance map is usable (guided light tracing)
@@ -299,7 +315,7 @@ class HierarchicalGrid:
             return
         new = max(need, 2 * cap)
         for name in ("child", "axis", "split", "depth", "box_lo", "box_hi", "node_count", "last_visit",
-                     "alpha", "mis_sum", "mis_n", "data_slot", "map_ok", "imap_ok"):
+                     "alpha", "mis_sum", "mis_n", "out_sum", "out_n", "data_slot", "map_ok", "imap_ok"):
             a = getattr(self, name)
             fill = {"child": -1, "data_slot": -1, "last_visit": -(1 << 30), "alpha": 0.5}.get(name, 0)
             b = np.full((new,) + a.shape[1:], fill, a.dtype)
@@ -349,7 +365,7 @@ class HierarchicalGrid:
 
     def memory_bytes(self):
         arrays = (self.child, self.axis, self.split, self.depth, self.box_lo, self.box_hi, self.node_count,
-                  self.last_visit, self.alpha, self.mis_sum, self.mis_n, self.data_slot, self.map_ok, self.imap_ok,
+                  self.last_visit, self.alpha, self.mis_sum, self.mis_n, self.out_sum, self.out_n, self.data_slot, self.map_ok, self.imap_ok,
                   self.slot_node) + tuple(getattr(self, name) for name in SLOT_ARRAYS)
         return int(sum(a.nbytes for a in arrays))
 
@@ -368,6 +384,19 @@ class HierarchicalGrid:
         return GuideState(self.lo.copy(), np.full(3, 1.0 / self.side), self.res.astype(np.int64),
                           self.child[:n], self.axis[:n], self.split[:n], slot, self.alpha[:n],
                           *tables, self.n_theta, self.n_phi, self.n_class)
+
+    def outgoing(self, min_samples=OUT_MIN_SAMPLES):
+        """(n_nodes,) float64: per leaf, the mean luminance of the radiance that camera paths arriving
+        there went on to collect (observe_outgoing), where at least `min_samples` arrived; else 0
+        (unknown). The adjoint estimate of the weight window (integrator.window_counts)."""
+        n = self.n_nodes
+        c = self.out_n[:n]
+        return np.where(c >= min_samples, self.out_sum[:n] / np.maximum(c, 1.0), 0.0)
+
+    def observe_outgoing(self, rec):
+        """Add a wave's records (a Records view) to the leaves' outgoing radiance: a record's vertex
+        sent back the radiance that its path's previous record received along its direction."""
+        _outgoing_stats(rec.node, rec.strategy, rec.prev, rec.radiance, self.out_sum, self.out_n)
 
     def lookup_state(self):
         """A state for locating points only (no maps)."""
@@ -452,6 +481,8 @@ class HierarchicalGrid:
             self.alpha[j] = self.alpha[node]
             self.mis_sum[j] = 0.5 * self.mis_sum[node]
             self.mis_n[j] = 0.5 * self.mis_n[node]
+            self.out_sum[j] = 0.5 * self.out_sum[node]
+            self.out_n[j] = 0.5 * self.out_n[node]
         self.box_hi[c, a] = value
         self.box_lo[c + 1, a] = value
         s = self.data_slot[node]
