@@ -18,7 +18,9 @@ The dimension layout is this table, and nothing else in the code hard-codes a di
 
 with BOUNCE = 2 and B = 8; bounce k = 0 is the first surface the camera ray hits.
 A path split into copies at bounce k (tracer.integrator, `split`) keeps its key; copy j >= 1
-takes `split_key(key, k, j)`, a fresh key that draws the same table from bounce k on.
+takes `split_key(key, k, j)`, a fresh key that draws the same table from bounce k on. The weight
+window's roulette at bounce k (integrator.split_counts) draws `uniform(split_key(key, k, 0), 0)`,
+from a key no copy gets.
 
 Photons (light paths traced to feed guides) have their own keys, `photon_key(seed, iteration,
 index)`, which no camera path shares, and their own table:

@@ -24,6 +24,12 @@ Both follow Algorithm 1 of Zhu et al. 2021 (Photon-Driven Neural Reconstruction 
   voxel's side shares, made the frozen maps' equal-spp variance 20-30% lower on cornell and ajar);
   the maps are rebuilt from every iteration's vertices alone.
 
+Splitting and the weight window (`split`, `window`, `window_low`; on for `photon` by default): the
+final passes split overweight paths and roulette those expected to bring little
+(integrator.trace_wave). For the window, each voxel learns from the training records the mean
+radiance that camera paths arriving in it went on to collect (HierarchicalGrid.outgoing); the
+render adds each pixel's value from the training passes' image.
+
 Direct light: next-event estimation already samples the light that a vertex receives straight
 from the emitters, so by default (`direct` 0) the maps learn the rest: photons deposit from their
 second hit on, and a camera vertex's record leaves out the emission its direction hits. With
