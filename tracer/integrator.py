@@ -418,6 +418,39 @@ SPLIT_MAX = 8  # copies a path is split into at most
 WINDOW_MIN_SURVIVAL = 0.05  # the weight window's roulette keeps a path with at least this probability
 
 
+@jit(inline="always")
+def _split_count(k, active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing, pixel_est,
+                 hi, low, threshold):
+    """split_counts for entry k; after the window's roulette it divides its path's beta and gain."""
+    i = active[k]
+    p = prim[k]
+    if p < 0 or depth[i] < 1:
+        return 1
+    if hi > 0.0:
+        x = triangle_point(tri, p, b1[k], b2[k])
+        ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])
+        arriving = -(ray_d[k, 0] * ng[0] + ray_d[k, 1] * ng[1] + ray_d[k, 2] * ng[2]) >= 0.0
+        nf = ng if arriving else (-ng[0], -ng[1], -ng[2])
+        node = find_voxel(gs, x, nf)
+        if node >= 0 and outgoing[node] > 0.0:
+            q = (0.2126 * beta[i, 0] + 0.7152 * beta[i, 1] + 0.0722 * beta[i, 2]) * outgoing[node] / pixel_est[pix[i]]
+            if q > hi:
+                return min(int(math.ceil(q / hi)), SPLIT_MAX)
+            if q < low:
+                ps = max(q / low, WINDOW_MIN_SURVIVAL)
+                if uniform(split_key(key[i], depth[i], 0), 0) >= ps:
+                    return 0
+                for c in range(3):
+                    beta[i, c] /= ps
+                gain[i] /= ps
+            return 1
+    if threshold > 0.0:
+        bm = max(beta[i, 0], max(beta[i, 1], beta[i, 2]))
+        if bm > threshold:
+            return min(int(math.ceil(bm)), SPLIT_MAX)
+    return 1
+
+
 @kernel
 def split_counts(active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing, pixel_est,
                  hi, low, threshold, ks):
@@ -429,38 +462,29 @@ def split_counts(active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth
     splits into min(ceil(q / hi), SPLIT_MAX) copies; below low it survives a roulette with probability
     max(q / low, WINDOW_MIN_SURVIVAL), its beta and gain divided by that (here, in place). Elsewhere
     (no window, or no estimate): throughput splitting, min(ceil(max beta), SPLIT_MAX) copies where
-    max beta > threshold > 0."""
-    n = active.shape[0]
-    for k in prange(n):
-        i = active[k]
-        ks[k] = 1
-        p = prim[k]
-        if p < 0 or depth[i] < 1:
-            continue
-        if hi > 0.0:
-            x = triangle_point(tri, p, b1[k], b2[k])
-            ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])
-            arriving = -(ray_d[k, 0] * ng[0] + ray_d[k, 1] * ng[1] + ray_d[k, 2] * ng[2]) >= 0.0
-            nf = ng if arriving else (-ng[0], -ng[1], -ng[2])
-            node = find_voxel(gs, x, nf)
-            if node >= 0 and outgoing[node] > 0.0:
-                q = (0.2126 * beta[i, 0] + 0.7152 * beta[i, 1] + 0.0722 * beta[i, 2]) * outgoing[node] / pixel_est[pix[i]]
-                if q > hi:
-                    ks[k] = min(int(math.ceil(q / hi)), SPLIT_MAX)
-                elif q < low:
-                    ps = max(q / low, WINDOW_MIN_SURVIVAL)
-                    if uniform(split_key(key[i], depth[i], 0), 0) >= ps:
-                        ks[k] = 0
-                    else:
-                        for c in range(3):
-                            beta[i, c] /= ps
-                        gain[i] /= ps
-                continue
-        if threshold > 0.0:
-            bm = max(beta[i, 0], max(beta[i, 1], beta[i, 2]))
-            if bm > threshold:
-                ks[k] = min(int(math.ceil(bm)), SPLIT_MAX)
-    return ks
+    max beta > threshold > 0. Returns (sum of ks, entries with ks 0)."""
+    wanted = 0
+    ended = 0
+    for k in prange(active.shape[0]):
+        m = _split_count(k, active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing,
+                         pixel_est, hi, low, threshold)
+        ks[k] = m
+        wanted += m
+        if m == 0:
+            ended += 1
+    return wanted, ended
+
+
+@jit(inline="always")
+def _copy_entry(k, e, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d):
+    """Wave entry k's hit (t, prim, b1, b2) to entry e of (t2, prim2, b12, b22), and its ray."""
+    t2[e] = t[k]
+    prim2[e] = prim[k]
+    b12[e] = b1[k]
+    b22[e] = b2[k]
+    for c in range(3):
+        ray_o[e, c] = ray_o[k, c]
+        ray_d[e, c] = ray_d[k, c]
 
 
 @jit
@@ -482,13 +506,7 @@ def split_paths(active, ks, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d, 
             continue
         active[e] = active[k]
         ks[e] = ks[k]
-        t2[e] = t[k]
-        prim2[e] = prim[k]
-        b12[e] = b1[k]
-        b22[e] = b2[k]
-        for c in range(3):
-            ray_o[e, c] = ray_o[k, c]
-            ray_d[e, c] = ray_d[k, c]
+        _copy_entry(k, e, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d)
         e += 1
     kept = e
     s = n_slots
@@ -502,13 +520,8 @@ def split_paths(active, ks, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d, 
         gain[i] /= m
         for j in range(1, m):
             active[e] = s
-            t2[e] = t2[k]
-            prim2[e] = prim2[k]
-            b12[e] = b12[k]
-            b22[e] = b22[k]
+            _copy_entry(k, e, t2, prim2, b12, b22, t2, prim2, b12, b22, ray_o, ray_d)
             for c in range(3):
-                ray_o[e, c] = ray_o[k, c]
-                ray_d[e, c] = ray_d[k, c]
                 beta[s, c] = beta[i, c]
                 L[s, c] = 0.0
             gain[s] = gain[i]
@@ -578,6 +591,14 @@ class WaveBuffers:
         self.records = Records.allocate(1)  # grown on demand when a guide records
         self.sp_o, self.sp_d, self.sp_L = z3(), z3(), z3()
         self.sp_tmax = np.zeros(size)
+        self._hits = ()  # hit arrays of a bounce with copies (copy_hits)
+
+    def copy_hits(self, *hits):
+        """Arrays with room for `capacity` entries, of the dtypes of `hits` (t, prim, b1, b2): where
+        split_paths writes a bounce's hits with its copies. Allocated once."""
+        if tuple(a.dtype for a in self._hits) != tuple(a.dtype for a in hits):
+            self._hits = tuple(np.empty(self.capacity, a.dtype) for a in hits)
+        return self._hits
 
 
 class Stats:
@@ -647,19 +668,18 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True,
         t0 = stats.tick("intersect", t0)
         if splitting:
             ks = buf.ks[:n_active]
-            split_counts(active[:n_active], rd, prim, b1, b2, scene.tri, ctx.tri_normal, buf.beta, buf.gain,
-                         buf.depth, buf.pix, buf.key, gs, outgoing, pixel_est, hi, low, split, ks)
-            wanted = int(ks.sum())
-            ended = int(np.count_nonzero(ks == 0))
+            wanted, ended = split_counts(active[:n_active], rd, prim, b1, b2, scene.tri, ctx.tri_normal, buf.beta,
+                                         buf.gain, buf.depth, buf.pix, buf.key, gs, outgoing, pixel_est, hi, low,
+                                         split, ks)
             if wanted > n_active or ended > 0:
-                hit2 = tuple(np.empty(min(wanted, buf.capacity), a.dtype) for a in (t, prim, b1, b2))
+                hit2 = buf.copy_hits(t, prim, b1, b2)
                 n_e, n_s = split_paths(active, ks, t, prim, b1, b2, *hit2, buf.ray_o, buf.ray_d, buf.beta, buf.gain,
                                    buf.L, buf.depth, buf.prev_pdf, buf.prev_delta, buf.key, buf.pix, buf.prev_rec,
                                    buf.parent, n_slots, buf.capacity)
                 stats.split_copies += n_s - n_slots
                 stats.window_ended += ended
                 n_slots, n_active = n_s, n_e
-                t, prim, b1, b2 = hit2
+                t, prim, b1, b2 = (a[:n_e] for a in hit2)
                 ro, rd = buf.ray_o[:n_active], buf.ray_d[:n_active]
             t0 = stats.tick("split", t0)
         if record > 0 and n_rec + n_active > rec.strategy.shape[0]:
