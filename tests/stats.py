@@ -40,3 +40,13 @@ def image_mean(result, mask=None):
         img, var = img.reshape(-1, 3), var.reshape(-1, 3)
     n = img.shape[0]
     return img.mean(axis=0), var.sum(axis=0) / (n * n)
+
+
+def assert_clean(result, what="render"):
+    """The render met no non-finite sample and wrote only finite pixels.
+
+    The integrator zeroes a non-finite sample before the film sees it (and counts it in
+    stats["nonfinite_samples"]), so `np.isfinite(image)` alone cannot fail: the count can."""
+    n = result.stats["nonfinite_samples"]
+    assert n == 0, f"{what}: {n} non-finite sample(s) were zeroed"
+    assert np.isfinite(result.image).all() and np.isfinite(result.variance).all(), f"{what}: non-finite pixels"
