@@ -19,7 +19,7 @@ def _sample_batch(lt, tri, x, u):
     out = np.full((n, 3), np.nan)
     pdfs = np.zeros(n)
     for i in range(n):
-        wi, dist, le, pdf = sample_light(lt, tri, (x[0], x[1], x[2]), u[i, 0], u[i, 1], u[i, 2])
+        wi, dist, le, pdf, _ = sample_light(lt, tri, (x[0], x[1], x[2]), u[i, 0], u[i, 1], u[i, 2])
         if pdf > 0.0:
             out[i, 0], out[i, 1], out[i, 2] = wi
             pdfs[i] = pdf

@@ -82,14 +82,37 @@ def init_paths(cam, width, height, crop, jitter, seed, sample0, g0, pix, key, ra
 
 @jit
 def _offset(x, ng, w, eps):
-    """x pushed off the surface by eps along the normal, to the side direction w leaves on."""
+    """x pushed off the surface by eps along the normal, to the side direction w leaves on (eps:
+    the triangle's entry of tracer.bvh.ray_offsets)."""
     s = eps if dot(w, ng) >= 0.0 else -eps
     return (x[0] + s * ng[0], x[1] + s * ng[1], x[2] + s * ng[2])
 
 
+@jit(inline="always")
+def shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps):
+    """(origin, unit direction, tmax) of the shadow ray from x (normal ng, offset eps) toward the
+    light sample at distance dist along wl, on triangle lt_tri (-1: the environment, tmax inf).
+    Both ends are offset by their own triangle's ray_offsets, the light's end along its normal
+    toward x (pbrt-v4's SpawnRayTo), so the ray stops short of the light's plane as Embree sees it.
+    tmax <= 0 means there is no room for a ray (x on the light)."""
+    o = _offset(x, ng, wl, eps)
+    if lt_tri < 0:
+        return o, wl, np.inf
+    li = lt.light_of_tri[lt_tri]
+    el = tri_eps[lt_tri]
+    y = (x[0] + dist * wl[0] + el * lt.normal[li, 0], x[1] + dist * wl[1] + el * lt.normal[li, 1],
+         x[2] + dist * wl[2] + el * lt.normal[li, 2])
+    d = (y[0] - o[0], y[1] - o[1], y[2] - o[2])
+    tmax = math.sqrt(dot(d, d))
+    if not tmax > 0.0:
+        return o, wl, 0.0
+    inv = 1.0 / tmax
+    return o, (d[0] * inv, d[1] * inv, d[2] * inv), tmax
+
+
 @kernel
 def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type, mat_param, lt,
-          beta, L, depth, prev_pdf, prev_delta, gain, key, aov, max_depth, rr_depth, eps,
+          beta, L, depth, prev_pdf, prev_delta, gain, key, aov, max_depth, rr_depth, tri_eps,
           alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow, gs,
           r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_L0, r_beta, r_pb, rec_base, record,
           prev_rec, r_prev):
@@ -181,9 +204,9 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
 
         # Next-event estimation (not at delta BSDFs)
         if not delta:
-            wl, dist, le, pl = sample_light(lt, tri, x, uniform(kk, bounce_dim(dk, LIGHT)),
-                                            uniform(kk, bounce_dim(dk, LIGHT_POS)),
-                                            uniform(kk, bounce_dim(dk, LIGHT_POS + 1)))
+            wl, dist, le, pl, lt_tri = sample_light(lt, tri, x, uniform(kk, bounce_dim(dk, LIGHT)),
+                                                    uniform(kk, bounce_dim(dk, LIGHT_POS)),
+                                                    uniform(kk, bounce_dim(dk, LIGHT_POS + 1)))
             if pl > 0.0 and (le[0] > 0.0 or le[1] > 0.0 or le[2] > 0.0):
                 wil = to_local(wl, s, tt, ng)
                 f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wil, True)
@@ -192,12 +215,11 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                     if a < 1.0:
                         pb = a * pb + (1.0 - a) * voxel_pdf(gs, node, wl)
                     w = power_heuristic(pl, pb)
-                    so = _offset(x, ng, wl, eps)
-                    tmax = dist - 2.0 * eps if math.isfinite(dist) else np.inf
+                    so, sd, tmax = shadow_ray(x, ng, tri_eps[p], wl, dist, lt, lt_tri, tri_eps)
                     if tmax > 0.0:
                         for c in range(3):
                             sh_o[k, c] = so[c]
-                            sh_d[k, c] = wl[c]
+                            sh_d[k, c] = sd[c]
                             sh_L[k, c] = b[c] * f[c] * le[c] * w / pl
                         sh_tmax[k] = tmax
                         has_shadow[k] = True
@@ -271,7 +293,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         if not ok:
             continue
 
-        no = _offset(x, ng, wiw, eps)
+        no = _offset(x, ng, wiw, tri_eps[p])
         for c in range(3):
             beta[i, c] = nb[c]
             next_o[k, c] = no[c]
@@ -686,7 +708,7 @@ def trace_wave(ctx, buf, film, sample0, g0, n, stats, observe=None, direct=True,
             rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
         shade(active[:n_active], ro, rd, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
               scene.materials.type, scene.materials.param, lights, buf.beta, buf.L, buf.depth,
-              buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.aov, ctx.max_depth, ctx.rr_depth, ctx.eps,
+              buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.aov, ctx.max_depth, ctx.rr_depth, ctx.tri_eps,
               buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow,
               gs, *rec[:11], n_rec, record, buf.prev_rec, rec.prev)
         t0 = stats.tick("shade", t0)

@@ -186,25 +186,26 @@ def triangle_light_pdf(lt, tri_index, dist2, cos_light):
 def sample_light(lt, tri, x, u_sel, u0, u1):
     """Pick a light and a point on it as seen from x.
 
-    Returns (wi, dist, radiance rgb, pdf): wi the unit world direction from x, dist the
+    Returns (wi, dist, radiance rgb, pdf, t): wi the unit world direction from x, dist the
     distance to the point (np.inf for the environment), pdf per unit solid angle including
-    the choice of light; pdf = 0 when the sample carries no light (back side, degenerate).
+    the choice of light (0 when the sample carries no light: back side, degenerate), t the
+    index of the triangle the point lies on (-1 for the environment).
     """
     if u_sel < lt.p_env:
         # The environment
         if lt.env_type == ENV_CONSTANT:
             wi = sample_uniform_sphere(u0, u1)
             pdf = lt.p_env * INV_4PI
-            return wi, np.inf, (lt.env_const[0], lt.env_const[1], lt.env_const[2]), pdf
+            return wi, np.inf, (lt.env_const[0], lt.env_const[1], lt.env_const[2]), pdf, -1
         su, sv, p = sample_distribution_2d(
             lt.env_cond_func, lt.env_cond_cdf, lt.env_marg_func, lt.env_marg_cdf, u0, u1
         )
         st = math.sin(math.pi * sv)
         if st <= 0.0 or p <= 0.0:
-            return (0.0, 0.0, 1.0), np.inf, (0.0, 0.0, 0.0), 0.0
+            return (0.0, 0.0, 1.0), np.inf, (0.0, 0.0, 0.0), 0.0, -1
         wi = env_dir(su, sv)
         rad = env_radiance(lt, wi)
-        return wi, np.inf, rad, lt.p_env * p / (2.0 * math.pi * math.pi * st)
+        return wi, np.inf, rad, lt.p_env * p / (2.0 * math.pi * math.pi * st), -1
     # A triangle, by power, then a point by area
     u = (u_sel - lt.p_env) / (1.0 - lt.p_env)
     _, _, li = sample_distribution_1d(lt.func, lt.cdf, min(u, 1.0 - 1e-12))
@@ -217,12 +218,12 @@ def sample_light(lt, tri, x, u_sel, u0, u1):
     dx, dy, dz = py - x[0], pyy - x[1], pz - x[2]
     d2 = dx * dx + dy * dy + dz * dz
     if d2 <= 0.0:
-        return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0
+        return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0, t
     dist = math.sqrt(d2)
     wi = (dx / dist, dy / dist, dz / dist)
     cos_l = -(wi[0] * lt.normal[li, 0] + wi[1] * lt.normal[li, 1] + wi[2] * lt.normal[li, 2])
     if cos_l <= 0.0:
-        return wi, dist, (0.0, 0.0, 0.0), 0.0
+        return wi, dist, (0.0, 0.0, 0.0), 0.0, t
     p_sel = (1.0 - lt.p_env) * (lt.cdf[li + 1] - lt.cdf[li])
     pdf = p_sel * d2 / (lt.area[li] * cos_l)
-    return wi, dist, (lt.radiance[li, 0], lt.radiance[li, 1], lt.radiance[li, 2]), pdf
+    return wi, dist, (lt.radiance[li, 0], lt.radiance[li, 1], lt.radiance[li, 2]), pdf, t

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from .bvh import make_accel
+from .bvh import make_accel, ray_offsets
 from .errors import SettingsError, unknown_name
 from .film import Film
 from .guiding import make_guide, warm_up_guides
@@ -58,9 +58,8 @@ class _Context:
         self.seed = int(seed)
         self.max_depth = int(max_depth)
         self.rr_depth = int(rr_depth)
-        # Ray offset: scaled to the scene, well above float32's resolution at its size
-        extent = float(np.abs(scene.bounds).max())
-        self.eps = 1e-5 * max(accel.scale, extent)
+        # Ray offsets per triangle, fitted to the float32 coordinates the ray queries see there
+        self.tri_eps = ray_offsets(tri, accel.centre)
         self.n_pixels = int(self.crop[2] * self.crop[3])
         self.guide_state = empty_state()
 

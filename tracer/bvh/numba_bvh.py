@@ -451,6 +451,7 @@ class NumbaBVH:
         tri = _check_tri(tri)
         self.n_triangles = len(tri)
         self.bounds, self.scale = _bounds(tri)
+        self.centre = self.bounds.mean(axis=0)
         limit = numba.config.NUMBA_NUM_THREADS
         self.threads = max(1, min(int(threads), limit) if threads else numba.get_num_threads())
         self.depth = 0

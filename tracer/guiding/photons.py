@@ -37,7 +37,7 @@ from .spatial import find_voxel
 
 
 @kernel
-def emit(lt, tri, centre, radius, eps, seed, iteration, g0, key, o, d, power, thr, depth):
+def emit(lt, tri, centre, radius, tri_eps, seed, iteration, g0, key, o, d, power, thr, depth):
     """Photons g0 .. g0+n-1 of an iteration: origin, direction, power (RGB), throughput 1."""
     n = key.shape[0]
     for i in prange(n):
@@ -53,7 +53,7 @@ def emit(lt, tri, centre, radius, eps, seed, iteration, g0, key, o, d, power, th
         u_sel = uniform(k, P_LIGHT)
         if u_sel < lt.p_env:
             # From the environment: a direction by the environment's sampling, a disk of radius R
-            ws, _, rad, pdf = sample_light(lt, tri, (centre[0], centre[1], centre[2]), u_sel,
+            ws, _, rad, pdf, _ = sample_light(lt, tri, (centre[0], centre[1], centre[2]), u_sel,
                                            uniform(k, P_POS), uniform(k, P_POS + 1))
             if not (pdf > 0.0):
                 continue
@@ -80,14 +80,14 @@ def emit(lt, tri, centre, radius, eps, seed, iteration, g0, key, o, d, power, th
         w = to_world(wl, s, t, nrm)
         for c in range(3):
             x = b0 * tri[tr, 0, c] + b1 * tri[tr, 1, c] + b2 * tri[tr, 2, c]
-            o[i, c] = x + eps * nrm[c]
+            o[i, c] = x + tri_eps[tr] * nrm[c]
             d[i, c] = w[c]
             power[i, c] = lt.radiance[li, c] * lt.area[li] * math.pi / p_sel
 
 
 @kernel
 def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type, mat_param, gs, data_slot,
-            key, power, thr, depth, max_hits, rr_depth, eps, alive, next_o, next_d,
+            key, power, thr, depth, max_hits, rr_depth, tri_eps, alive, next_o, next_d,
             dep_node, dep_bin, dep_val, dep_x, dep_n, first_hit, imp, p_imp):
     """One hit for every active photon: deposit, then sample the BSDF (importance mode) and roulette.
 
@@ -159,7 +159,7 @@ def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type,
                 continue
             nb = (nb[0] / q, nb[1] / q, nb[2] / q)
         w = to_world(wi, s, tt, ng)
-        sg = eps if dot(w, ng) >= 0.0 else -eps
+        sg = tri_eps[p] if dot(w, ng) >= 0.0 else -tri_eps[p]
         for c in range(3):
             thr[i, c] = nb[c]
             next_o[k, c] = x[c] + sg * ng[c]
@@ -224,7 +224,7 @@ def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 <<
         max_hits = ctx.max_depth - 1 if ctx.max_depth > 0 else 64
     max_hits = max(int(max_hits), 1)
     centre = 0.5 * (scene.bounds[0] + scene.bounds[1])
-    radius = 0.5 * float(np.linalg.norm(scene.bounds[1] - scene.bounds[0])) * 1.01 + ctx.eps
+    radius = 0.5 * float(np.linalg.norm(scene.bounds[1] - scene.bounds[0])) * 1.01
     buf = PhotonBuffers(min(wave_size, max(n_photons, 1)))
     if imp is None or not p_imp > 0.0:
         imp = gs._replace(slot=np.full(gs.slot.shape[0], -1, np.int32))
@@ -233,7 +233,7 @@ def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 <<
     rays = 0
     for g0 in range(0, n_photons, buf.size):
         n = min(buf.size, n_photons - g0)
-        emit(lt, scene.tri, centre, radius, ctx.eps, ctx.seed, iteration, g0, buf.key[:n], buf.o[:n], buf.d[:n],
+        emit(lt, scene.tri, centre, radius, ctx.tri_eps, ctx.seed, iteration, g0, buf.key[:n], buf.o[:n], buf.d[:n],
              buf.power[:n], buf.thr[:n], buf.depth[:n])
         live = np.flatnonzero(np.any(buf.power[:n] > 0.0, axis=1))
         m = live.size
@@ -246,7 +246,7 @@ def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 <<
             rays += m
             scatter(active[:m], d, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
                     scene.materials.type, scene.materials.param, gs, data_slot, buf.key, buf.power, buf.thr,
-                    buf.depth, max_hits, ctx.rr_depth, ctx.eps, buf.alive[:m], buf.next_o[:m], buf.next_d[:m],
+                    buf.depth, max_hits, ctx.rr_depth, ctx.tri_eps, buf.alive[:m], buf.next_o[:m], buf.next_d[:m],
                     buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m], buf.dep_n[:m], first_hit,
                     imp, float(p_imp))
             m, nd = compact_wave(m, buf.alive, buf.next_o, buf.next_d, active, buf.ray_o, buf.ray_d,
