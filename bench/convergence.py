@@ -15,18 +15,29 @@ budget; bsdf is then not run again at them: its time runs are its points against
 per seed. Writes to `--out` (default bench/results/convergence/):
 
     records.jsonl                 one JSON record per run: scene, method, settings, seed, spp,
-                                  wall time split into learning / inference / rendering, guide
-                                  memory, every metric against the reference
+                                  samples, wall time split into the guide's learning
+                                  (`time_learning`), its map rebuild between passes (`update_s`),
+                                  network inference (`inference_s`, 0 for guides without a
+                                  network) and rendering; the shade stage's seconds (`shade_s`),
+                                  guide memory, every metric against the reference
     <scene>_time.png, _spp.png    relMSE against wall time and against spp, log-log, one line
                                   per method (median over seeds, band from min to max)
-    summary.md                    per scene, each method's error at equal time as a ratio to bsdf
+    summary.md                    per scene, each method's error at equal time as a ratio to bsdf;
+                                  each guide's shading cost over bsdf's (shade seconds per sample,
+                                  median over seeds, minus bsdf's, in ns); learning, update time
+                                  and memory at the largest budget
     images/<scene>/<run>.npy      every run's image (float32), so that the records can be scored
                                   again against a better reference later:
 
     python -m bench.convergence --rescore --out bench/results/convergence [--scene-dir ../shared/scenes]
 
 re-reads the records and images in --out, recomputes every metric against the references as they
-are now, and writes records, charts and summary again (no rendering).
+are now, and writes records, charts and summary again (no rendering). Records stored before
+`update_s`, `shade_s` and `samples` were recorded still score: their update time is the old
+`time_inference` (then a misnomer for the same rebuild), their shading cost is shown as "-".
+
+Every output is written to a temporary file beside it and renamed into place (bench.atomic), so a
+stopped run leaves complete files: records.jsonl is rewritten after every run.
 """
 import argparse
 import json
@@ -41,6 +52,7 @@ from tracer import metrics
 from tracer.cli import _guide_opts
 from tracer.guiding import make_guide
 
+from . import atomic
 from .reference import ROOT, default_out, load
 
 DEFAULT_OUT = os.path.join(ROOT, "bench", "results", "convergence")
@@ -84,14 +96,16 @@ def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
         os.makedirs(images, exist_ok=True)
         tag = method.replace(":", "_").replace(",", "_").replace("=", "-")
         image = f"{tag}_{'t%g' % time_budget if time_budget else 'spp%d' % spp}_s{seed}.npy"
-        np.save(os.path.join(images, image), r.image.astype(np.float32))
+        atomic.save_npy(os.path.join(images, image), r.image.astype(np.float32))
     learning = s.get("guide_time_learning", 0.0)
+    update = s.get("guide_time_update", 0.0)
     inference = s.get("guide_time_inference", 0.0)
     return {
         "method": method, "seed": seed, "budget": "time" if time_budget else "spp",
-        "time_budget": time_budget, "spp": s["spp"],
-        "time_total": s["time_total"], "time_learning": learning, "time_inference": inference,
-        "time_rendering": s["time_total"] - learning - inference,
+        "time_budget": time_budget, "spp": s["spp"], "samples": s["samples"],
+        "time_total": s["time_total"], "time_learning": learning, "update_s": update, "inference_s": inference,
+        "time_rendering": s["time_total"] - learning - update - inference,
+        "shade_s": s["time_stages"]["shade"],
         "guide_memory_bytes": s.get("guide_memory_bytes", 0),
         "settings": {k: s[k] for k in ("max_depth", "rr_depth", "accel", "threads", "pixel_filter")},
         "metrics": metrics.all_metrics(r.image, ref),
@@ -156,7 +170,7 @@ def chart(records, scene, methods, x_key, path):
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path)
+    atomic.write(path, fig.savefig)
     plt.close(fig)
 
 
@@ -164,6 +178,44 @@ def floor_check(records, floor):
     """(ok, smallest relMSE measured): a reference judges errors down to ten times its floor."""
     smallest = min(r["metrics"]["relMSE"] for r in records)
     return floor * 10.0 <= smallest, smallest
+
+
+def update_seconds(r):
+    """The guide's map rebuild between passes in record `r`; records made before `update_s` stored
+    the same figure as `time_inference`. None if neither is there."""
+    return r.get("update_s", r.get("time_inference"))
+
+
+def shade_per_sample(r):
+    """Seconds of the shade stage per camera sample of record `r`, None for records without them."""
+    if r.get("shade_s") is None or not r.get("samples"):
+        return None
+    return r["shade_s"] / r["samples"]
+
+
+def _median_of(rs, value):
+    """Median over records `rs` of value(r); None when there are none or any lacks the value."""
+    v = [value(r) for r in rs]
+    return float(np.median(v)) if v and all(x is not None for x in v) else None
+
+
+def shade_ns(recs, method, t):
+    """Median over seeds of `method`'s shade seconds per sample at time budget `t`, in ns; None
+    where there are no runs or they lack the figures."""
+    v = _median_of([r for r in recs if r["method"] == method and r["budget"] == "time" and r["time_budget"] == t],
+                   shade_per_sample)
+    return None if v is None else v * 1e9
+
+
+def shade_overhead_ns(recs, method, t):
+    """What `method`'s shading costs over bsdf's at time budget `t`, in ns per sample: the median
+    over seeds of its shade seconds per sample, minus bsdf's median. None where either is unknown."""
+    mine, base = shade_ns(recs, method, t), shade_ns(recs, "bsdf", t)
+    return None if mine is None or base is None else mine - base
+
+
+def _cell(v, fmt):
+    return "-" if v is None or not np.isfinite(v) else format(v, fmt)
 
 
 def summary_table(all_records, scenes, methods, times, floors):
@@ -207,14 +259,25 @@ def summary_table(all_records, scenes, methods, times, floors):
                       "error is independent of a render's, so each measured relMSE is about the true one plus the",
                       "floor): " + "; ".join(corrected) + ".", ""]
         if guided:
-            lines += ["| method (at the largest time budget) | spp | learning s | inference s | guide memory MB |",
-                      "|---|---|---|---|---|"]
+            lines += ["Guided shading's cost over `bsdf`'s: the shade stage's seconds per sample (median over",
+                      "seeds) minus `bsdf`'s, in ns per sample; the `bsdf` row is its own (\"-\": not recorded).", "",
+                      "| shade ns per sample | " + " | ".join(f"{t:g} s" for t in times) + " |",
+                      "|---|" + "---|" * len(times),
+                      "| bsdf | " + " | ".join(_cell(shade_ns(recs, "bsdf", t), ".0f") for t in times) + " |"]
+            for m in guided:
+                cells = [_cell(shade_overhead_ns(recs, m, t), "+.0f") for t in times]
+                lines.append(f"| {m} | " + " | ".join(cells) + " |")
+            lines.append("")
+            lines += ["| method (at the largest time budget) | spp | learning s | update s | network inference s "
+                      "| guide memory MB |",
+                      "|---|---|---|---|---|---|"]
             for m in guided:
                 rr = [r for r in recs if r["method"] == m and r["time_budget"] == max(times)]
                 if rr:
                     lines.append(f"| {m} | {np.median([r['spp'] for r in rr]):.0f} | "
                                  f"{np.median([r['time_learning'] for r in rr]):.2f} | "
-                                 f"{np.median([r['time_inference'] for r in rr]):.2f} | "
+                                 f"{_cell(_median_of(rr, update_seconds), '.2f')} | "
+                                 f"{_cell(_median_of(rr, lambda r: r.get('inference_s')), '.2f')} | "
                                  f"{max(r['guide_memory_bytes'] for r in rr) / 1e6:.0f} |")
             lines.append("")
     return "\n".join(lines)
@@ -222,16 +285,13 @@ def summary_table(all_records, scenes, methods, times, floors):
 
 def write_outputs(out, all_records, scenes, methods, times, floors):
     """records.jsonl, the two charts per scene and summary.md in `out`; returns the summary."""
-    with open(os.path.join(out, "records.jsonl"), "w") as log:
-        for r in all_records:
-            log.write(json.dumps(r) + "\n")
+    atomic.write_jsonl(os.path.join(out, "records.jsonl"), all_records)
     for name in scenes:
         recs = [r for r in all_records if r["scene"] == name]
         chart(recs, name, methods, "time", os.path.join(out, f"{name}_time.png"))
         chart(recs, name, methods, "spp", os.path.join(out, f"{name}_spp.png"))
     table = summary_table(all_records, scenes, methods, times, floors)
-    with open(os.path.join(out, "summary.md"), "w") as f:
-        f.write(table + "\n")
+    atomic.write_text(os.path.join(out, "summary.md"), table + "\n")
     return table
 
 
@@ -288,40 +348,40 @@ def main(argv=None):
     all_records = []
     floors = {}
     scenes = [s.strip() for s in a.scenes.split(",") if s.strip()]
-    with open(os.path.join(a.out, "records.jsonl"), "w") as log:  # written as runs finish, in case of a stop
-        for i, given in enumerate(scenes):
-            path = scene_path(given, a.scene_dir)
-            name = os.path.splitext(os.path.basename(given))[0] if given.endswith((".obj", ".json")) else given
-            scenes[i] = name
-            ref, _, ref_meta = reference_for(path)
-            floors[name] = ref_meta["noise_floor_relmse"]
-            scene = tracer.load_scene(path)
-            images = os.path.join(a.out, "images", name)
-            tracer.render(scene, spp=1)  # compile and warm up outside every budget
-            recs = []
-            # methods interleaved, so that a drift of the machine's speed touches them alike
+    log = os.path.join(a.out, "records.jsonl")
+    for i, given in enumerate(scenes):
+        path = scene_path(given, a.scene_dir)
+        name = os.path.splitext(os.path.basename(given))[0] if given.endswith((".obj", ".json")) else given
+        scenes[i] = name
+        ref, _, ref_meta = reference_for(path)
+        floors[name] = ref_meta["noise_floor_relmse"]
+        scene = tracer.load_scene(path)
+        images = os.path.join(a.out, "images", name)
+        tracer.render(scene, spp=1)  # compile and warm up outside every budget
+        recs = []
+
+        def done(r):
+            r.update(scene=name, scene_path=os.path.relpath(path, ROOT),
+                     machine=f"{platform.machine()}, {os.cpu_count()} cores", date=time.strftime("%Y-%m-%d %H:%M"))
+            recs.append(r)
+            atomic.write_jsonl(log, all_records + recs)  # after every run, in case of a stop
+
+        # methods interleaved, so that a drift of the machine's speed touches them alike
+        for seed in range(a.seeds):
+            for t in times:
+                for m in methods:
+                    done(run_one(scene, m, seed, ref, time_budget=t, images=images))
+                    print(f"{name} {m} seed {seed} time {t:g}s: {recs[-1]['spp']} spp, "
+                          f"relMSE {recs[-1]['metrics']['relMSE']:.4g}", flush=True)
+        spps = ([] if a.spp == "none" else [int(s) for s in a.spp.split(",")] if a.spp else  # bsdf's median spp per time budget
+                sorted({int(np.median([r["spp"] for r in recs if r["method"] == "bsdf" and r["time_budget"] == t]))
+                        for t in times}))
+        # bsdf's own spp points are its time runs (the default spp budgets are its median spp)
+        for m in (methods if a.spp else [m for m in methods if m != "bsdf"]):
             for seed in range(a.seeds):
-                for t in times:
-                    for m in methods:
-                        recs.append(run_one(scene, m, seed, ref, time_budget=t, images=images))
-                        print(f"{name} {m} seed {seed} time {t:g}s: {recs[-1]['spp']} spp, "
-                              f"relMSE {recs[-1]['metrics']['relMSE']:.4g}", flush=True)
-            spps = ([] if a.spp == "none" else [int(s) for s in a.spp.split(",")] if a.spp else  # bsdf's median spp per time budget
-                    sorted({int(np.median([r["spp"] for r in recs if r["method"] == "bsdf" and r["time_budget"] == t]))
-                            for t in times}))
-            # bsdf's own spp points are its time runs (the default spp budgets are its median spp)
-            for m in (methods if a.spp else [m for m in methods if m != "bsdf"]):
-                for seed in range(a.seeds):
-                    for n in spps:
-                        recs.append(run_one(scene, m, seed, ref, spp=n, images=images))
-            for r in recs:
-                r["scene"] = name
-                r["scene_path"] = os.path.relpath(path, ROOT)
-                r["machine"] = f"{platform.machine()}, {os.cpu_count()} cores"
-                r["date"] = time.strftime("%Y-%m-%d %H:%M")
-                log.write(json.dumps(r) + "\n")
-            log.flush()
-            all_records += recs
+                for n in spps:
+                    done(run_one(scene, m, seed, ref, spp=n, images=images))
+        all_records += recs
     print(write_outputs(a.out, all_records, scenes, methods, times, floors))
     return 0
 

@@ -11,19 +11,37 @@ reference's own noise floor, the relMSE it is expected to have against the true 
 mean(var / (R^2 + 0.01)). A reference can judge errors down to about ten times that floor.
 
 With --append, a new independent render (the next seed) is merged with the stored one, weighted
-by spp, so a reference can be built over several sessions. The default output folder is the
-scene's own folder for scenes inside this repository, and bench/results/references/<name>
-otherwise (external scenes are never copied into the repository).
+by spp, so a reference can be built over several sessions. Before merging, the new segment must
+agree with the stored mean: per channel, the image mean of (new - stored) over its standard error
+from both variances (bias_z; aggregated over pixels first) must stay below the two-sided 1%
+threshold, Sidak-corrected over the three channels. A segment of a scene or renderer that has
+changed since would otherwise bias the reference without a trace; when it fails, nothing is
+written and the command exits naming the folder and the z-scores (`--force` merges anyway).
+
+reference.json keeps `segments`, one per render merged in: seed, spp, seconds, the commit of this
+repository (`-dirty` when tracked files differed from it), date, machine, command, and for appended ones
+the z-scores of the check. A reference made before segments were recorded gets one segment
+synthesized from its old fields (its `seeds`, commit and date "unknown").
+
+The EXR, PNG and JSON are written to temporary files beside them and then renamed into place, so
+a stopped run leaves the stored reference whole. The default output folder is the scene's own
+folder for scenes inside this repository, and bench/results/references/<name> otherwise
+(external scenes are never copied into the repository).
 """
 import argparse
 import json
 import os
 import platform
+import sys
 import time
 
 import numpy as np
+from scipy import stats
 
 import tracer
+from tracer.provenance import git_commit
+
+from . import atomic
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CHANNELS = ("R", "G", "B", "var.R", "var.G", "var.B")
@@ -56,6 +74,41 @@ def merge(m1, v1, n1, m2, v2, n2):
     return w1 * m1 + w2 * m2, w1 * w1 * v1 + w2 * w2 * v2
 
 
+def bias_z(image, variance, ref, ref_var):
+    """Per channel: mean over pixels of (I - R) divided by its standard error, from the per-pixel
+    variances of I's and R's means (summed over pixels first, so that a pixel's noisy variance
+    estimate does not bias the score)."""
+    d = (image.astype(np.float64) - ref).reshape(-1, 3)
+    v = (variance.astype(np.float64) + ref_var).reshape(-1, 3)
+    n = d.shape[0]
+    se = np.sqrt(v.sum(axis=0)) / n
+    return np.where(se > 0, d.mean(axis=0) / np.where(se > 0, se, 1.0), 0.0)
+
+
+def z_threshold(tests, alpha=0.01):
+    """|z| threshold of a two-sided test at family-wise level alpha over `tests` tests (Sidak)."""
+    level = 1.0 - (1.0 - alpha) ** (1.0 / tests)
+    return float(stats.norm.isf(level / 2))
+
+
+def agreement(mean, var, ref, ref_var, alpha=0.01):
+    """(agrees, z per channel, threshold): does an independent estimate (mean, var) agree with the
+    stored one (ref, ref_var)? bias_z per channel against z_threshold(3, alpha)."""
+    z = bias_z(mean, var, ref, ref_var)
+    zc = z_threshold(3, alpha)
+    return bool(np.all(np.abs(z) < zc)), z, zc
+
+
+def segments_of(meta):
+    """The segments of a stored reference's metadata; one synthesized from the old fields (all its
+    seeds, spp and seconds; commit and date unknown) for a reference made before they were kept."""
+    if "segments" in meta:
+        return [dict(s) for s in meta["segments"]]
+    return [{"seeds": list(meta["seeds"]), "spp": int(meta["spp"]), "seconds": meta["seconds"],
+             "commit": "unknown", "date": "unknown", "command": meta.get("command", "unknown"),
+             "synthesized": "from the fields of a reference made before segments were recorded"}]
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench.reference", description=__doc__.splitlines()[0])
     p.add_argument("scene")
@@ -65,7 +118,10 @@ def main(argv=None):
     p.add_argument("--seed", type=int, default=1000, help="seed of the first render (appends use the next)")
     p.add_argument("--out", default=None)
     p.add_argument("--append", action="store_true", help="merge with the reference already in --out")
+    p.add_argument("--force", action="store_true", help="with --append: merge even if the new segment "
+                   "disagrees with the stored mean")
     a = p.parse_args(argv)
+    command = "python -m bench.reference " + " ".join(argv if argv is not None else sys.argv[1:])
     out = a.out or default_out(a.scene)
     os.makedirs(out, exist_ok=True)
     scene = tracer.load_scene(a.scene)
@@ -74,23 +130,36 @@ def main(argv=None):
     if a.append and os.path.isfile(os.path.join(out, "reference.exr")):
         old = load(out)
         seed = max(old[2]["seeds"]) + 1
+    commit, date = git_commit() or "unknown", time.strftime("%Y-%m-%d %H:%M")  # what renders the segment
     t0 = time.time()
     r = tracer.render(scene, spp=a.spp, time=a.time, seed=seed, progress=True)
     seconds = time.time() - t0
     mean, var, spp = r.image.astype(np.float64), r.variance.astype(np.float64), r.stats["spp"]
     seeds, total_seconds = [seed], seconds
+    segment = {"seed": int(seed), "spp": int(spp), "seconds": round(seconds, 1), "commit": commit, "date": date,
+               "machine": f"{platform.machine()}, {os.cpu_count()} cores", "command": command}
+    segments = [segment]
     if old is not None:
         om, ov, meta = old
         if om.shape != mean.shape:
             raise SystemExit(f"{out}: stored reference is {om.shape[1]}x{om.shape[0]}, the scene renders "
                              f"{mean.shape[1]}x{mean.shape[0]}")
+        ok, z, zc = agreement(mean, var, om, ov)
+        zs = ", ".join(f"{v:+.2f}" for v in z)
+        if not ok and not a.force:
+            raise SystemExit(f"bench.reference: {out}: the new segment (seed {seed}, {spp} spp) disagrees with "
+                             f"the stored mean: z (R, G, B) = {zs}, |z| must stay below {zc:.2f}; nothing "
+                             f"written (--force merges anyway)")
+        print(f"{out}: new segment against the stored mean: z (R, G, B) = {zs} (threshold {zc:.2f})"
+              + ("" if ok else ": disagrees, merged because of --force"))
+        segment["z"] = [round(float(v), 3) for v in z]
+        if not ok:
+            segment["forced"] = True
+        segments = segments_of(meta) + segments
         mean, var = merge(om, ov, meta["spp"], mean, var, spp)
         spp += meta["spp"]
         seeds = meta["seeds"] + seeds
         total_seconds += meta["seconds"]
-    tracer.write_image(os.path.join(out, "reference.exr"), np.concatenate([mean, var], axis=2),
-                       channel_names=CHANNELS)
-    tracer.write_image(os.path.join(out, "reference.png"), mean)
     meta = {
         "scene": os.path.relpath(os.path.abspath(a.scene), ROOT),
         "width": scene.width, "height": scene.height, "spp": int(spp), "seconds": round(total_seconds, 1),
@@ -98,10 +167,15 @@ def main(argv=None):
         "integrator": "path tracing, bsdf sampling + NEE (MIS)", "accel": r.stats["accel"],
         "machine": f"{platform.machine()}, {os.cpu_count()} cores",
         "noise_floor_relmse": noise_floor(mean, var),
-        "command": "python -m bench.reference " + " ".join(argv if argv is not None else __import__("sys").argv[1:]),
+        "command": command,
+        "segments": segments,
     }
-    with open(os.path.join(out, "reference.json"), "w") as f:
-        json.dump(meta, f, indent=1)
+    atomic.write_all([
+        (os.path.join(out, "reference.exr"),
+         atomic.image_writer(np.concatenate([mean, var], axis=2), channel_names=CHANNELS)),
+        (os.path.join(out, "reference.png"), atomic.image_writer(mean)),
+        (os.path.join(out, "reference.json"), atomic.text_writer(json.dumps(meta, indent=1))),
+    ])
     print(f"{out}/reference.exr: {spp} spp, {total_seconds:.0f} s, noise floor relMSE {meta['noise_floor_relmse']:.3g}")
     return 0
 

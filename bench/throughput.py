@@ -9,13 +9,14 @@ fastest run is reported with the median beside it (shared 2-core machines vary b
 run to run).
 """
 import argparse
-import json
 import os
 import platform
 
 import numba
 
 import tracer
+
+from . import atomic
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CORNELL = os.path.join(ROOT, "scenes", "cornell", "cornell.obj")
@@ -73,8 +74,7 @@ def main(argv=None):
             print(f"    {parts}")
     if a.json:
         os.makedirs(os.path.dirname(os.path.abspath(a.json)), exist_ok=True)
-        with open(a.json, "w") as f:
-            json.dump(rows, f, indent=1)
+        atomic.write_json(a.json, rows, indent=1)  # a temporary file renamed into place
     return 0
 
 

@@ -8,10 +8,15 @@ Per scene, each guide is trained once (`--train-spp`, seed 99), then frozen
 way. The figure is the relative variance of one sample, averaged over pixels:
 mean(var_of_mean x spp / (R^2 + 0.01)), R the scene's reference (box-downsampled by `--scale`),
 i.e. the relMSE one sample would have; the lower, the better the learned sampling. It isolates
-the maps from learning cost and scheduling, which bench.convergence measures. Heavy-tailed
-estimators show up as a large spread over seeds, so every seed's figure is printed. Beside it,
-the render time per spp (median over seeds) and the "efficiency" ratio to bsdf, relative variance
-x time per spp: the relMSE ratio the frozen maps would reach at equal time, learning not counted.
+the maps from learning cost and scheduling, which bench.convergence measures.
+
+Per method the table gives the mean of that figure over seeds, the standard error of that mean
+(sample standard deviation over seeds / sqrt(seeds); "-" with one seed), its min and max, and
+every seed's figure. The mean, not the median: a heavy-tailed estimator shows itself by a rare
+seed with a large variance, which the median would hide and an equal-time render would not.
+Beside it, the ratio of the means to bsdf's, the render time per spp (median over seeds) and the
+"efficiency" ratio to bsdf, mean relative variance x time per spp: the relMSE ratio the frozen
+maps would reach at equal time, learning not counted.
 """
 import argparse
 
@@ -50,6 +55,14 @@ def measure(scene, ref, method, spp, seeds, train_spp):
     return out
 
 
+def summarise(vals):
+    """(mean, standard error of the mean, min, max) of the per-seed figures; the standard error is
+    nan with one seed."""
+    v = np.asarray(vals, dtype=np.float64)
+    sem = float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")
+    return float(v.mean()), sem, float(v.min()), float(v.max())
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench.variance", description=__doc__.splitlines()[0])
     p.add_argument("--scenes", required=True)
@@ -68,8 +81,10 @@ def main(argv=None):
         name, settings = method_spec(m)
         make_guide(name, **settings)
     print(f"relative variance of one sample (mean over pixels of var / (R^2 + 0.01)); {a.spp} spp x "
-          f"{a.seeds} seeds, guides trained at {a.train_spp} spp then frozen, 1/{a.scale} resolution")
-    print(f"{'scene':22s} {'method':28s} {'median':>9s} {'vs bsdf':>8s} {'s/spp':>7s} {'eff vs bsdf':>11s}  per seed")
+          f"{a.seeds} seeds, guides trained at {a.train_spp} spp then frozen, 1/{a.scale} resolution; "
+          f"mean over seeds, its standard error and min/max; ratio and efficiency from the means")
+    print(f"{'scene':22s} {'method':28s} {'mean':>9s} {'+-sem':>9s} {'min':>9s} {'max':>9s} {'vs bsdf':>8s} "
+          f"{'s/spp':>7s} {'eff vs bsdf':>11s}  per seed")
     for given in [s.strip() for s in a.scenes.split(",") if s.strip()]:
         path = scene_path(given, a.scene_dir)
         ref = downsample(reference_for(path)[0], a.scale)
@@ -78,13 +93,15 @@ def main(argv=None):
         base = base_t = None
         for m in methods:
             vals, secs = zip(*measure(scene, ref, m, a.spp, a.seeds, a.train_spp))
-            med, t = float(np.median(vals)), float(np.median(secs))
+            mean, sem, lo, hi = summarise(vals)
+            t = float(np.median(secs))
             if m == "bsdf":
-                base, base_t = med, t
-            ratio = f"{med / base:8.2f}" if base else " " * 8
-            eff = f"{med * t / (base * base_t):11.2f}" if base else " " * 11
-            print(f"{given:22s} {m:28s} {med:9.4g} {ratio} {t:7.4f} {eff}  " + " ".join(f"{v:.3g}" for v in vals),
-                  flush=True)
+                base, base_t = mean, t
+            ratio = f"{mean / base:8.2f}" if base else f"{'-':>8s}"
+            eff = f"{mean * t / (base * base_t):11.2f}" if base else f"{'-':>11s}"
+            sem_s = f"{sem:9.3g}" if np.isfinite(sem) else f"{'-':>9s}"
+            print(f"{given:22s} {m:28s} {mean:9.4g} {sem_s} {lo:9.4g} {hi:9.4g} {ratio} {t:7.4f} {eff}  "
+                  + " ".join(f"{v:.3g}" for v in vals), flush=True)
     return 0
 
 

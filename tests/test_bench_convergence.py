@@ -2,6 +2,8 @@
 import json
 import os
 
+import pytest
+
 from bench import convergence, reference
 from tests import scenes
 
@@ -21,6 +23,11 @@ def test_convergence_writes_records_charts_and_table(tmp_path, monkeypatch):
     assert {"relMSE", "MSE", "MrSE", "1-SSIM"} <= set(r["metrics"]) and r["method"] == "bsdf"
     assert r["time_rendering"] <= r["time_total"] and r["guide_memory_bytes"] == 0
     assert r["scene"] == "box"
+    for r in recs:  # every camera sample of the 8 x 8 image is counted, and bsdf has no guide time
+        assert r["samples"] == r["spp"] * 64
+        assert 0 < r["shade_s"] < r["time_total"]
+        assert r["update_s"] == r["inference_s"] == r["time_learning"] == 0.0
+    assert not [f for f in os.listdir(out) if ".tmp-" in f]  # every output renamed into place
     assert os.path.isfile(out / "box_time.png") and os.path.isfile(out / "box_spp.png")
     table = (out / "summary.md").read_text()
     assert "| bsdf |" in table and "(1.00)" in table
@@ -88,3 +95,69 @@ def test_rescore_scores_the_stored_images_against_the_current_reference(tmp_path
         assert a["metrics"] == metrics.all_metrics(image, data[:, :, :3])
         assert a["metrics"]["relMSE"] > b["metrics"]["relMSE"]  # the image is about half the new reference
         assert {k: v for k, v in a.items() if k != "metrics"} == {k: v for k, v in b.items() if k != "metrics"}
+
+
+def test_update_time_is_the_maps_rebuild():
+    """render()'s `guide_time_update` is the histogram guides' map rebuild between passes (part of
+    each pass's `time_update`, the whole update call), and `guide_time_inference`, network
+    inference, is 0 for them; bench.convergence records them as `update_s` and `inference_s`."""
+    import tempfile
+
+    import tracer
+
+    with tempfile.TemporaryDirectory() as d:
+        scene = tracer.load_scene(scenes.closed_box(d, 0.5, 1.0, width=8, height=8))
+    r = tracer.render(scene, spp=8, guide="grid", seed=3)
+    s = r.stats
+    updates = sum(p.get("time_update", 0.0) for p in s["passes"])
+    assert [p["kind"] for p in s["passes"] if "time_update" in p][:2] == ["pilot", "train"]
+    assert 0.0 < s["guide_time_update"] <= updates
+    assert s["guide_time_learning"] > 0.0 and s["guide_time_inference"] == 0.0
+    # learning is what observe (inside the passes) and the first part of update cost
+    assert s["guide_time_learning"] + s["guide_time_update"] <= updates + sum(p["time"] for p in s["passes"])
+    assert "time_inference" not in s and tracer.render(scene, spp=2).stats["guide_time_update"] == 0.0
+
+
+def _rec(method, t, seed, shade_ns=None, samples=10**6, **extra):
+    r = {"scene": "s", "method": method, "seed": seed, "budget": "time", "time_budget": t, "spp": 100,
+         "metrics": {"relMSE": 0.1}, "time_learning": 0.5, "guide_memory_bytes": 0, **extra}
+    if shade_ns is not None:
+        r.update(shade_s=shade_ns * 1e-9 * samples, samples=samples)
+    return r
+
+
+def test_summary_shows_the_guides_shading_cost_over_bsdf():
+    """Per time budget: median over seeds of a guide's shade seconds per sample minus bsdf's
+    median, in ns; bsdf's row its own; "-" where records lack the figures (runs made before)."""
+    recs = [_rec("bsdf", 10, s, ns) for s, ns in enumerate((100, 120, 500))]
+    recs += [_rec("grid", 10, s, ns, update_s=0.25, inference_s=0.0) for s, ns in enumerate((200, 210, 900))]
+    recs += [_rec("bsdf", 20, 0, 110)]
+    recs += [_rec("grid", 20, 0, time_inference=0.32)]  # a record made before update_s and shade_s
+    table = convergence.summary_table(recs, ["s"], ["bsdf", "grid"], [10, 20], {"s": 1e-6})
+    lines = table.splitlines()
+    i = lines.index("| shade ns per sample | 10 s | 20 s |")
+    # medians: bsdf 120, grid 210 (means 240 and 437 would give +197)
+    assert lines[i + 2:i + 4] == ["| bsdf | 120 | 110 |", "| grid | +90 | - |"]
+    assert "| method (at the largest time budget) | spp | learning s | update s | network inference s |" in table
+    assert "| grid | 100 | 0.50 | 0.32 | - | 0 |" in table  # an old record's time_inference was its update time
+    assert convergence.shade_overhead_ns(recs, "grid", 10) == pytest.approx(90.0)
+
+
+def test_rescore_reads_records_made_before_update_and_shade_times(tmp_path, monkeypatch):
+    """Records stored before `update_s`, `inference_s`, `shade_s` and `samples` existed (the update
+    time under `time_inference`) are scored again; the figures they lack show as "-"."""
+    out, _ = _box_run_at_one_time_budget(tmp_path, monkeypatch)
+    recs = [json.loads(line) for line in open(out / "records.jsonl")]
+    old = []
+    for r in recs:
+        for m in ("bsdf", "grid"):  # a guided method, so that the guide tables are made
+            o = {k: v for k, v in r.items() if k not in ("update_s", "inference_s", "shade_s", "samples")}
+            old.append(dict(o, method=m, time_inference=0.25))
+    (out / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in old))
+    assert convergence.main(["--rescore", "--out", str(out)]) == 0
+    table = (out / "summary.md").read_text()
+    assert "| grid | - |" in table and "| bsdf | - |" in table  # shading cost unknown
+    assert "| 0.25 | - |" in table  # update s from time_inference, network inference unknown
+    after = [json.loads(line) for line in open(out / "records.jsonl")]
+    assert [{k: v for k, v in a.items() if k != "metrics"} for a in after] == \
+        [{k: v for k, v in o.items() if k != "metrics"} for o in old]

@@ -42,4 +42,27 @@ def test_non_finite_pixels_are_caught(box, monkeypatch, capsys):
 
     monkeypatch.setattr(tracer, "render", broken)
     assert robustness.main(["--scenes", obj, "--methods", "bsdf", "--spp", "4", "--crop", "32"]) == 1
-    assert "NaN/inf" in capsys.readouterr().out
+    assert "<- NaN/inf pixels" in capsys.readouterr().out
+
+
+def test_non_finite_samples_are_caught(box, monkeypatch, capsys):
+    """The integrator zeroes a NaN/inf sample before the film, so the image stays finite: the
+    render's `nonfinite_samples` count is what must fail the run, and it is the row's figure."""
+    obj, _ = box
+    real = tracer.render
+
+    def counted(*a, **k):
+        r = real(*a, **k)
+        r.stats["nonfinite_samples"] = 3
+        return r
+
+    monkeypatch.setattr(tracer, "render", counted)
+    row = robustness.check(obj, "bsdf", 4, 7, 32)
+    assert row["nonfinite_samples"] == 3 and row["nonfinite_pixels"] == 0
+    assert robustness.main(["--scenes", obj, "--methods", "bsdf", "--spp", "4", "--crop", "32"]) == 1
+    lines = capsys.readouterr().out.splitlines()
+    head = next(i for i, line in enumerate(lines) if line.startswith("scene"))
+    assert "NaN/inf samples" in lines[head]
+    cols = lines[head + 1].split()
+    assert cols[1] == "bsdf" and cols[3] == "0" and cols[4] == "3"  # NaN/inf pixels, NaN/inf samples
+    assert lines[head + 1].endswith("<- NaN/inf samples")

@@ -1,13 +1,24 @@
-"""Command line and bad input: one clear line naming the file and the problem, exit code 2."""
+"""Command line and bad input: one clear line naming the file and the problem, exit code 2.
+
+Every render here is tiny (8-32 pixels a side, a few spp) and asserts that it met no non-finite
+sample (the stats JSON's nonfinite_samples)."""
+import datetime
 import json
 import os
+import re
+import select
+import signal
+import stat
 import subprocess
 import sys
+import time
 
+import numba
 import numpy as np
 import pytest
 
 import tracer
+from tracer import metrics
 from tracer.cli import main
 from tests import scenes
 
@@ -22,16 +33,38 @@ def run_cli(capsys, *args):
 
 
 def fails_with(capsys, args, *fragments):
+    """The run exits with 2 and prints exactly one line on stderr, `tracer: ...`, holding every
+    fragment (no warnings before it, no traceback)."""
     code, out, err = run_cli(capsys, *args)
     assert code == 2, (code, out, err)
     lines = [line for line in err.splitlines() if line.strip()]
-    assert lines, "no error message"
-    msg = lines[-1]
+    assert len(lines) == 1, f"stderr must be exactly one line, got {lines}"
+    msg = lines[0]
     assert msg.startswith("tracer: "), msg
     assert "Traceback" not in err
     for frag in fragments:
         assert frag in msg, (frag, msg)
     return msg
+
+
+def render_cli(capsys, tmp_path, name, *args, scene=CORNELL, size=16, spp=2, quiet=True):
+    """Render `scene` through the CLI into tmp_path/name.exr; (image, stats JSON, stderr).
+    Asserts exit 0 and no non-finite sample."""
+    out = tmp_path / f"{name}.exr"
+    opts = ["--width", size, "--height", size] if size else []
+    opts += ["--spp", spp] if spp and "--time" not in args else []
+    code, text, err = run_cli(capsys, scene, *opts, *args, "-o", out, *(["-q"] if quiet else []))
+    assert code == 0, err
+    stats = json.loads((tmp_path / f"{name}.json").read_text())
+    assert stats["nonfinite_samples"] == 0
+    return tracer.read_image(out), stats, err
+
+
+@pytest.fixture
+def all_threads():
+    """--threads changes Numba's thread count for the rest of the process: put it back."""
+    yield
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
 def test_render_writes_exr_png_json(tmp_path, capsys):
@@ -45,7 +78,10 @@ def test_render_writes_exr_png_json(tmp_path, capsys):
     assert aovs.shape == (24, 32, 7) and np.all(np.isfinite(aovs))
     stats = json.loads((tmp_path / "c.json").read_text())
     assert stats["spp"] == 2 and stats["samples"] == 32 * 24 * 2 and stats["rays"] > 0
+    assert stats["nonfinite_samples"] == 0 and stats["interrupted"] is False
     assert set(stats["time_stages"]) >= {"intersect", "shade", "occluded"}
+    assert not (tmp_path / "c.variance.exr").exists()  # only with --variance
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.aovs.exr", "c.exr", "c.json", "c.png"]  # no temp files
 
 
 def test_reference_prints_metrics(tmp_path, capsys):
@@ -55,8 +91,27 @@ def test_reference_prints_metrics(tmp_path, capsys):
                               "-o", tmp_path / "x.exr", "--reference", ref)
     assert code == 0, err
     assert "relMSE" in text and "MSE" in text and "1-SSIM" in text
-    m = json.loads((tmp_path / "x.json").read_text())["metrics"]
-    assert m["relMSE"] > 0 and np.isfinite(m["1-SSIM"])
+    stats = json.loads((tmp_path / "x.json").read_text())
+    m = stats["metrics"]
+    assert m["relMSE"] > 0 and np.isfinite(m["1-SSIM"]) and stats["nonfinite_samples"] == 0
+
+
+def test_reference_with_crop(tmp_path, capsys):
+    """--reference with --crop compares the window of the reference (this crashed with a traceback
+    for a crop of three numbers), and a window too small for SSIM fails before rendering."""
+    ref = tmp_path / "ref.exr"
+    render_cli(capsys, tmp_path, "ref", spp=4)
+    img, stats, _ = render_cli(capsys, tmp_path, "x", "--crop", "2,3,8,6", "--reference", ref, spp=1)
+    assert img.shape == (6, 8, 3)
+    window = tracer.read_image(ref)[3:9, 2:10]
+    assert stats["metrics"]["relMSE"] == pytest.approx(metrics.relmse(img, window), rel=1e-6)
+    fails_with(capsys, [CORNELL, "--width", 16, "--height", 16, "--crop", "1,2,3", "--reference", ref,
+                        "-o", tmp_path / "y.exr"], "--crop", "four integers", "'1,2,3'")
+    fails_with(capsys, [CORNELL, "--width", 16, "--height", 16, "--crop", "0,0,2,2", "--reference", ref,
+                        "-o", tmp_path / "y.exr"], "ref.exr", "too small", "1-SSIM")
+    fails_with(capsys, [CORNELL, "--width", 16, "--height", 16, "--crop", "10,0,8,8", "--reference", ref,
+                        "-o", tmp_path / "y.exr"], "crop 10,0,8,8", "16x16")
+    assert not (tmp_path / "y.exr").exists()
 
 
 def test_python_dash_m_entry_point(tmp_path):
@@ -65,6 +120,9 @@ def test_python_dash_m_entry_point(tmp_path):
                         "-o", str(out), "-q"], capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert p.returncode == 0, p.stderr
     assert out.is_file()
+    stats = json.loads((tmp_path / "m.json").read_text())
+    assert stats["nonfinite_samples"] == 0
+    assert stats["command_line"][1:] == [CORNELL, "--spp", "1", "--width", "8", "--height", "8", "-o", str(out), "-q"]
     p = subprocess.run([sys.executable, "-m", "tracer", "nope.obj"], capture_output=True, text=True, cwd=ROOT,
                        timeout=300)
     assert p.returncode == 2 and p.stderr.strip().splitlines() == ["tracer: nope.obj: OBJ file not found"]
@@ -80,11 +138,24 @@ def test_missing_mtl(tmp_path, capsys):
     fails_with(capsys, [obj, "-o", tmp_path / "o.exr"], "lamp.obj", "lamp.mtl", "not found")
 
 
-def test_missing_texture(tmp_path, capsys):
+def test_missing_texture_is_a_warning(tmp_path, capsys):
+    """Textures are replaced by the constant anyway: a missing one is reported, not an error."""
     obj = scenes.light_quad(tmp_path, (1, 1, 1))
     with open(tmp_path / "lamp.mtl", "a") as f:
         f.write("map_Kd wood.png\n")
-    fails_with(capsys, [obj, "-o", tmp_path / "o.exr"], "lamp.mtl", "wood.png", "not found")
+    img, stats, err = render_cli(capsys, tmp_path, "o", scene=obj, size=None, spp=None)
+    assert img.shape == (8, 8, 3) and img.min() > 0
+    missing = [line for line in err.splitlines() if "wood.png" in line]
+    assert len(missing) == 1 and missing[0].startswith("tracer: warning: ")
+    assert "lamp.mtl" in missing[0] and "not found" in missing[0]
+
+
+def test_undefined_material_without_light_is_one_line(tmp_path, capsys):
+    """A 0-byte MTL: the warning that 'lamp' is not defined is held back, and the one error line
+    says what the scene lacks and why."""
+    obj = scenes.light_quad(tmp_path, (1, 1, 1))
+    (tmp_path / "lamp.mtl").write_text("")
+    fails_with(capsys, [obj, "-o", tmp_path / "o.exr"], "lamp.obj", "no light", "'lamp' not defined in lamp.mtl")
 
 
 @pytest.mark.parametrize("line,what", [("v 1 2\n", "malformed vertex"), ("v 1 nan 2\n", "not finite"),
@@ -141,14 +212,130 @@ def test_guide_settings(tmp_path, capsys):
     fails_with(capsys, [CORNELL, "--guide", "grid", "--guide-opt", "iterations=2.5"], "iterations", "integer")
     fails_with(capsys, [CORNELL, "--guide", "grid", "--guide-opt", "iterations"], "KEY=VALUE")
     fails_with(capsys, [CORNELL, "--guide", "grid", "--guide-opt", "reconstruct=magic"], "magic", "gaussian")
-    out = tmp_path / "g.exr"
-    code, _, err = run_cli(capsys, CORNELL, "--guide", "photon", "--guide-opt", "iterations=2", "--width", "16",
-                           "--height", "16", "--spp", "12", "-o", out, "-q")
-    assert code == 0, err
-    stats = json.loads((tmp_path / "g.json").read_text())
+    _, stats, err = render_cli(capsys, tmp_path, "g", "--guide", "photon", "--guide-opt", "iterations=2",
+                               spp=12, quiet=False)
     assert stats["guide"] == "photon" and stats["guide_stats"]["settings"]["iterations"] == 2
     assert stats["guide_memory_bytes"] > 0 and stats["spp"] == 12
-    assert [p["kind"] for p in stats["passes"]][:3] == ["pilot", "train", "train"]
+    kinds = [p["kind"] for p in stats["passes"]]
+    assert kinds[:3] == ["pilot", "train", "train"] and set(kinds[3:]) == {"final"}
+    # the progress bar names each phase
+    for phase in ("pilot", "train 1/2", "train 2/2", "final"):
+        assert f"{phase}:" in err, (phase, err)
+
+
+def test_time_budget_guided(tmp_path, capsys):
+    """--time stops near its budget (which includes the pilot and the training), and the bar names
+    the phases of a guided render under a time budget too."""
+    budget = 2.0
+    _, stats, err = render_cli(capsys, tmp_path, "t", "--time", budget, "--guide", "grid", "--guide-opt",
+                               "iterations=2", quiet=False)
+    kinds = [p["kind"] for p in stats["passes"]]
+    assert kinds[0] == "pilot" and "final" in kinds and stats["spp"] > 1
+    assert 0.4 * budget < stats["time_total"] < 1.5 * budget + 0.5, stats["time_total"]
+    assert "pilot:" in err and "final:" in err and "budget 2s" in err
+
+
+def test_max_depth_1_shows_only_emitters(tmp_path, capsys):
+    lit = {}
+    for depth in (1, -1):
+        img, stats, _ = render_cli(capsys, tmp_path, f"d{depth}", "--max-depth", depth, size=32)
+        assert stats["max_depth"] == depth
+        lit[depth] = (img.max(axis=2) > 0).mean()
+    assert lit[1] < 0.05 and lit[-1] > 0.5, lit  # the light alone, then most of the box
+
+
+def test_rr_depth(tmp_path, capsys):
+    """Russian roulette from the first bounce on ends paths sooner: fewer rays, another image."""
+    a, sa, _ = render_cli(capsys, tmp_path, "rr1", "--rr-depth", 1)
+    b, sb, _ = render_cli(capsys, tmp_path, "rr5", "--rr-depth", 5)
+    assert (sa["rr_depth"], sb["rr_depth"]) == (1, 5)
+    assert sa["rays"] < 0.9 * sb["rays"] and not np.array_equal(a, b)
+
+
+def test_seed(tmp_path, capsys):
+    a, sa, _ = render_cli(capsys, tmp_path, "s1", "--seed", 1)
+    b, _, _ = render_cli(capsys, tmp_path, "s1again", "--seed", 1)
+    c, sc, _ = render_cli(capsys, tmp_path, "s2", "--seed", 2)
+    assert sa["seed"] == 1 and sc["seed"] == 2
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+def test_threads_wave_size_and_accel_keep_the_image(tmp_path, capsys, all_threads):
+    """--threads, --wave-size and --accel numba change how the work is done, not the samples."""
+    ref, _, _ = render_cli(capsys, tmp_path, "ref")
+    img, stats, _ = render_cli(capsys, tmp_path, "t1", "--threads", 1)
+    assert stats["threads"] == 1
+    np.testing.assert_array_equal(img, ref)
+    img, stats, _ = render_cli(capsys, tmp_path, "w37", "--wave-size", 37)
+    assert stats["wave_size"] == 37
+    np.testing.assert_array_equal(img, ref)
+    img, stats, _ = render_cli(capsys, tmp_path, "nb", "--accel", "numba")
+    assert stats["accel"] == "numba"
+    np.testing.assert_allclose(img, ref, rtol=1e-4, atol=1e-6)
+
+
+def test_point_filter(tmp_path, capsys):
+    """With emitters only, a point-filtered pixel sees the light or not: two values; the box
+    filter gives the light's edge pixels values in between."""
+    point, stats, _ = render_cli(capsys, tmp_path, "pt", "--filter", "point", "--max-depth", 1, size=32, spp=4)
+    box, _, _ = render_cli(capsys, tmp_path, "bx", "--max-depth", 1, size=32, spp=4)
+    assert stats["pixel_filter"] == "point"
+    assert len(np.unique(point[..., 0])) == 2 and len(np.unique(box[..., 0])) > 2
+
+
+def test_crop_is_the_window_of_the_full_render(tmp_path, capsys):
+    full, _, _ = render_cli(capsys, tmp_path, "full")
+    img, stats, _ = render_cli(capsys, tmp_path, "crop", "--crop", "4,6,8,5")
+    assert img.shape == (5, 8, 3) and (stats["width"], stats["height"]) == (8, 5) and stats["crop"] == [4, 6, 8, 5]
+    np.testing.assert_array_equal(img, full[6:11, 4:12])
+
+
+def test_exposure_changes_the_png_only(tmp_path, capsys):
+    a, sa, _ = render_cli(capsys, tmp_path, "e0")
+    b, sb, _ = render_cli(capsys, tmp_path, "e2", "--exposure", 2)
+    np.testing.assert_array_equal(a, b)  # the EXR stays linear and untouched
+    assert sb["preview_exposure"] == pytest.approx(sa["preview_exposure"] + 2)
+    pa, pb = tracer.read_image(tmp_path / "e0.png"), tracer.read_image(tmp_path / "e2.png")
+    assert pb.mean() > pa.mean() + 0.05 and (pb >= pa).all()
+
+
+def test_variance_exr(tmp_path, capsys):
+    """--variance writes the library's result.variance (of each pixel's mean) beside the image."""
+    img, _, _ = render_cli(capsys, tmp_path, "v", "--variance", spp=4)
+    var = tracer.read_image(tmp_path / "v.variance.exr")
+    assert var.shape == img.shape and np.isfinite(var).all() and var.min() >= 0 and (var.max(axis=2) > 0).mean() > 0.5
+    result = tracer.render(tracer.load_scene(CORNELL, width=16, height=16), spp=4)
+    np.testing.assert_array_equal(var, result.variance)
+
+
+def test_version_and_provenance(tmp_path, capsys):
+    code, out, err = run_cli(capsys, "--version")
+    assert code == 0 and out.strip() == f"tracer {tracer.__version__}" and not err
+    _, stats, _ = render_cli(capsys, tmp_path, "p", size=8, spp=1)
+    assert stats["tracer_version"] == tracer.__version__
+    assert stats["command_line"] == sys.argv
+    assert datetime.datetime.fromisoformat(stats["date"]).tzinfo is not None
+    commit = stats["git_commit"]
+    assert commit is None or re.fullmatch(r"[0-9a-f]{40}(-dirty)?", commit), commit
+
+
+def test_list_guides(capsys):
+    from tracer.guiding import guide_names, guide_settings
+
+    code, out, err = run_cli(capsys, "--list-guides")
+    assert code == 0 and not err
+    blocks = {}
+    for line in out.splitlines():
+        if not line.startswith(" "):
+            name = line.split(":")[0]
+            blocks[name] = []
+        else:
+            blocks[name].append(line.strip())
+    assert list(blocks) == list(guide_names())
+    for name in guide_names():
+        expected = [f"{k} = {v}" for k, v in sorted(guide_settings(name).items())] or ["(no settings)"]
+        assert blocks[name] == expected, name
 
 
 def test_unknown_accel_and_option(capsys):
@@ -156,14 +343,150 @@ def test_unknown_accel_and_option(capsys):
     fails_with(capsys, [CORNELL, "--frobnicate"], "--frobnicate")
 
 
+def test_output_folder_is_created(tmp_path, capsys):
+    img, _, _ = render_cli(capsys, tmp_path / "new" / "sub", "c", size=8, spp=1)
+    assert img.shape == (8, 8, 3) and (tmp_path / "new" / "sub" / "c.png").is_file()
+    # ... but not for a run that fails on its input
+    fails_with(capsys, [tmp_path / "none.obj", "-o", tmp_path / "other" / "c.exr"], "none.obj", "not found")
+    assert not (tmp_path / "other").exists()
+
+
+def _unwritable_folder(tmp_path):
+    """A folder that exists but where no file can be created, or None."""
+    if hasattr(os, "geteuid") and os.geteuid() == 0:
+        return "/proc" if os.path.isdir("/proc/self") else None  # root may write anywhere but /proc
+    if os.name != "posix":
+        return None
+    folder = tmp_path / "readonly"
+    folder.mkdir()
+    folder.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    return str(folder)
+
+
 def test_unwritable_output(tmp_path, capsys):
-    fails_with(capsys, [CORNELL, "-o", tmp_path / "no" / "such" / "dir.exr"], "dir.exr", "cannot write")
     fails_with(capsys, [CORNELL, "-o", tmp_path / "x.png"], "x.png", ".exr")
+    (tmp_path / "d.exr").mkdir()
+    fails_with(capsys, [CORNELL, "-o", tmp_path / "d.exr"], "d.exr", "folder")
+    folder = _unwritable_folder(tmp_path)
+    if folder is None:
+        pytest.skip("no folder here that exists but cannot be written")
+    try:
+        t0 = time.perf_counter()
+        # a 60 s render that would only fail when it writes: the check must come before it
+        fails_with(capsys, [CORNELL, "--time", 60, "--width", 8, "--height", 8, "-o", os.path.join(folder, "x.exr")],
+                   "x.exr", "cannot write")
+        assert time.perf_counter() - t0 < 30
+    finally:
+        if folder.startswith(str(tmp_path)):
+            os.chmod(folder, stat.S_IRWXU)
+
+
+def test_atomic_outputs_replace_the_old_ones(tmp_path, capsys, monkeypatch):
+    """A run that fails while writing leaves the previous outputs whole and no temporary files."""
+    render_cli(capsys, tmp_path, "c", size=8, spp=1)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+
+    def fail(src, dst):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", fail)
+    fails_with(capsys, [CORNELL, "--width", 8, "--height", 8, "--spp", 1, "--seed", 5, "-o", tmp_path / "c.exr", "-q"],
+               "c.exr", "No space left")
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def _corrupt_exrs(tmp_path, name):
+    """Files named `name`, one per folder: random bytes, a real EXR cut in half, and one cut in its
+    header (for which OpenImageIO reports several lines)."""
+    real = tmp_path / "real.exr"
+    tracer.write_image(real, np.random.default_rng(1).random((32, 32, 3)))
+    data = real.read_bytes()
+    files = {"random": np.random.default_rng(2).bytes(4000), "half": data[: len(data) // 2], "header": data[:100]}
+    for folder, content in files.items():
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / name).write_bytes(content)
+    return [tmp_path / folder / name for folder in files]
+
+
+def test_missing_or_corrupt_reference(tmp_path, capsys):
+    fails_with(capsys, [CORNELL, "--reference", tmp_path / "gone.exr", "-o", tmp_path / "o.exr"],
+               "gone.exr", "reference image not found")
+    for bad in _corrupt_exrs(tmp_path, "ref.exr"):
+        fails_with(capsys, [CORNELL, "--reference", bad, "-o", tmp_path / "o.exr"], str(bad), "cannot read reference")
 
 
 def test_missing_environment_map(tmp_path, capsys):
     obj = scenes.sphere_under_sky(tmp_path, 0.5, 1.0, env={"map": "gone.exr"})
     fails_with(capsys, [obj, "-o", tmp_path / "o.exr"], "gone.exr", "not found")
+
+
+def test_corrupt_environment_map(tmp_path, capsys):
+    for bad in _corrupt_exrs(tmp_path, "sky.exr"):
+        obj = scenes.sphere_under_sky(bad.parent, 0.5, 1.0, env={"map": "sky.exr"})
+        fails_with(capsys, [obj, "-o", tmp_path / "o.exr"], str(bad), "cannot read environment map")
+
+
+@pytest.mark.parametrize("args,what", [(["--spp", 0], "--spp must be >= 1, got 0"),
+                                       (["--time", 0], "--time must be a positive"),
+                                       (["--time", "nan"], "--time must be a positive"),
+                                       (["--max-depth", 0], "--max-depth"),
+                                       (["--wave-size", 0], "--wave-size"),
+                                       (["--exposure", "inf"], "--exposure")])
+def test_bad_numbers(tmp_path, capsys, args, what):
+    fails_with(capsys, [CORNELL, *args, "-o", tmp_path / "o.exr"], what)
+
+
+def test_compile_notice(tmp_path, capsys, monkeypatch):
+    """A render whose kernels are not cached says so before the ~30 s of compiling (not with -q)."""
+    from tracer import _jit
+
+    for cached, quiet in ((False, False), (True, False), (False, True)):
+        monkeypatch.setattr(_jit, "kernels_cached", lambda *names: cached)
+        _, _, err = render_cli(capsys, tmp_path, "n", size=8, spp=1, quiet=quiet)
+        assert ("compiling the kernels" in err) == (not cached and not quiet), (cached, quiet, err)
+    monkeypatch.undo()
+    assert _jit.kernels_cached("integrator.shade")  # after a render, in this cache
+    assert not _jit.kernels_cached("integrator.no_such_kernel")
+
+
+def test_sigint_writes_the_partial_image_and_exits_130(tmp_path):
+    """Ctrl-C in the middle of a pass: exit 130, the EXR, PNG and JSON of what was rendered, and a
+    summary whose spp is the one the progress bar showed last."""
+    out = tmp_path / "i.exr"
+    p = subprocess.Popen([sys.executable, "-m", "tracer", CORNELL, "--spp", "1000000", "--width", "32",
+                          "--height", "32", "--wave-size", "4096", "-o", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    err = b""
+    try:
+        deadline = time.monotonic() + 300  # the first run after an edit compiles for ~30 s
+        while time.monotonic() < deadline:  # until the bar shows samples: then it is rendering
+            if select.select([p.stderr], [], [], 1.0)[0]:
+                chunk = os.read(p.stderr.fileno(), 4096)
+                assert chunk, f"tracer ended before rendering: {err.decode(errors='replace')}"
+                err += chunk
+                if any(int(n) >= 4 for n in re.findall(rb"(\d+)/1000000 spp", err)):
+                    break
+        else:
+            pytest.fail(f"no progress within the deadline: {err.decode(errors='replace')}")
+        p.send_signal(signal.SIGINT)
+        stdout, rest = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    err = (err + rest).decode(errors="replace")
+    assert p.returncode == 130, err
+    assert "Traceback" not in err
+    stats = json.loads((tmp_path / "i.json").read_text())
+    assert stats["interrupted"] is True and stats["nonfinite_samples"] == 0
+    assert 4 <= stats["spp"] <= stats["spp_mean"] < 1000000
+    img = tracer.read_image(out)
+    assert img.shape == (32, 32, 3) and np.isfinite(img).all() and img.mean() > 0
+    assert (tmp_path / "i.png").is_file()
+    summary = re.search(r", (\d+) spp \(interrupted", stdout.decode())
+    assert summary, stdout
+    assert int(summary.group(1)) == round(stats["spp_mean"])
+    shown = re.findall(r"(\d+)/1000000 spp", err)
+    assert shown and shown[-1] == summary.group(1), (shown[-3:], summary.group(1))
 
 
 def test_library_errors_are_tracer_errors(tmp_path):

@@ -8,6 +8,7 @@ import pytest
 import tracer
 from tracer import bsdfs
 from tests import scenes
+from tests.stats import assert_clean
 
 MTL_CASES = {
     "matte": ("Kd 0.5 0.4 0.3\nillum 1", bsdfs.DIFFUSE, dict(kd=[0.5, 0.4, 0.3])),
@@ -87,6 +88,7 @@ def test_image_right_is_cross_forward_up(tmp_path):
                              {"camera": {"origin": [0, 0, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 60},
                               "film": {"width": 32, "height": 16}})
     r = tracer.render(tracer.load_scene(obj), spp=1)
+    assert_clean(r)
     lit = r.image[:, :, 0] > 0
     assert lit[:, 16:].sum() > 10 and lit[:, :16].sum() == 0
     # with up = -y, right = cross(forward, up) is -x: the lamp moves to the left half
@@ -94,7 +96,9 @@ def test_image_right_is_cross_forward_up(tmp_path):
     from tracer.camera import Camera
 
     scene.camera = Camera.look_at([0, 0, 3], [0, 0, 0], [0, -1, 0], 60, "x", 32, 16)
-    lit2 = tracer.render(scene, spp=1).image[:, :, 0] > 0
+    r2 = tracer.render(scene, spp=1)
+    assert_clean(r2)
+    lit2 = r2.image[:, :, 0] > 0
     assert lit2[:, :16].sum() > 10 and lit2[:, 16:].sum() == 0
 
 
@@ -102,6 +106,7 @@ def test_bare_obj_is_framed(tmp_path):
     v, f = scenes.box_faces((10, 10, 10), (12, 13, 11), inward=False)
     obj = scenes.write_scene(tmp_path, "bare", [("lamp", v, f)], {"lamp": "Kd 0 0 0\nKe 1 1 1"}, None)
     r = tracer.render(tracer.load_scene(obj, width=32, height=32), spp=1)
+    assert_clean(r)
     lit = (r.image[:, :, 0] > 0).mean()
     assert 0.05 < lit < 0.95  # the object is in view and does not fill it
 
@@ -112,3 +117,59 @@ def test_scene_repr_is_readable():
     scene = tracer.load_scene(os.path.join(os.path.dirname(__file__), "..", "scenes", "cornell", "cornell.obj"))
     text = repr(scene)
     assert "cornell.obj" in text and "32 triangles" in text and "256x256" in text
+
+
+def test_latin1_obj_and_mtl_load_and_render(tmp_path):
+    """An OBJ with a Latin-1 comment and a Latin-1 material name (in the OBJ and the MTL): read
+    in the same encoding, so the material is found (this failed with ModuleNotFoundError:
+    charset_normalizer in trimesh)."""
+    obj = scenes.light_quad(tmp_path, (1, 1, 1))
+    for name in ("lamp.obj", "lamp.mtl"):
+        text = (tmp_path / name).read_text().replace("lamp\n", "lampé\n")
+        (tmp_path / name).write_bytes(("# exporté par Blender\n" + text).encode("latin-1"))
+    scene = tracer.load_scene(obj)
+    assert scene.materials.names == ["lampé"] and not scene.warnings
+    r = tracer.render(scene, spp=1)
+    assert_clean(r)
+    np.testing.assert_allclose(r.image, 1.0)
+
+
+def test_undefined_material_is_named(tmp_path):
+    """A 0-byte MTL: the warning names the material the OBJ uses and the MTL it looked in; the
+    material is diffuse 0.8 under its own name, so that the sidecar can override it."""
+    obj = scenes.sphere_under_sky(tmp_path, 0.5, 1.0)
+    (tmp_path / "sky.mtl").write_text("")
+    scene = tracer.load_scene(obj)
+    assert scene.warnings == [f"{obj}: material 'ball' is not defined in sky.mtl; using diffuse 0.8"]
+    i = scene.materials.names.index("ball")
+    assert scene.materials.type[i] == bsdfs.DIFFUSE
+    np.testing.assert_array_equal(scene.materials.param[i, :3], 0.8)
+    side = json.loads((tmp_path / "sky.json").read_text())
+    side["materials"] = {"ball": {"kd": [0.2, 0.3, 0.4]}}
+    (tmp_path / "sky.json").write_text(json.dumps(side))
+    scene = tracer.load_scene(obj)
+    assert scene.warnings == []  # defined by the sidecar
+    np.testing.assert_array_equal(scene.materials.param[scene.materials.names.index("ball"), :3], [0.2, 0.3, 0.4])
+
+
+def test_undefined_materials_keep_their_faces(tmp_path):
+    """Faces of a material the MTL lacks keep that material, in an OBJ that uses it twice between
+    others (trimesh groups faces by material and forgets the names of undefined ones)."""
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    groups = [("lamp", v, [[0, 1, 2]]), ("wall", v + [0, 0, 1], [[0, 1, 2]]), ("floor", v + [0, 0, 2], [[0, 1, 2]]),
+              ("lamp", v + [0, 0, 3], [[0, 1, 2]]), ("wall", v + [0, 0, 4], [[0, 1, 2]])]
+    obj = scenes.write_scene(tmp_path, "m", groups, {"lamp": "Kd 0 0 0\nKe 1 1 1"}, None)
+    scene = tracer.load_scene(obj)
+    names = [scene.materials.names[i] for i in scene.tri_material]
+    by_z = dict(zip(scene.tri[:, 0, 2], names))
+    assert by_z == {0.0: "lamp", 1.0: "wall", 2.0: "floor", 3.0: "lamp", 4.0: "wall"}
+    assert scene.warnings == [f"{obj}: materials 'wall', 'floor' are not defined in m.mtl; using diffuse 0.8"]
+
+
+def test_usemtl_without_mtllib(tmp_path):
+    obj = scenes.sphere_under_sky(tmp_path, 0.5, 1.0)
+    text = (tmp_path / "sky.obj").read_text()
+    (tmp_path / "sky.obj").write_text(text.replace("mtllib sky.mtl\n", ""))
+    scene = tracer.load_scene(obj)
+    assert scene.materials.names == ["ball"]
+    assert scene.warnings == [f"{obj}: material 'ball' is not defined (the OBJ names no MTL file); using diffuse 0.8"]

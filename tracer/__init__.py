@@ -16,9 +16,9 @@ _os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from .errors import SceneError, SettingsError, TracerError
 from .imageio import read_image, write_image
+from .provenance import __version__
 from .render import RenderResult, render, write_outputs
 from .scene import load_scene
 
-__version__ = "0.1.0"
 __all__ = ["load_scene", "render", "write_image", "read_image", "write_outputs", "RenderResult",
            "TracerError", "SceneError", "SettingsError"]

@@ -54,3 +54,15 @@ def kernel(fn=None, **extra):
     if fn is None:
         return lambda f: njit(**opts)(f)
     return njit(**opts)(fn)
+
+
+def kernels_cached(*names):
+    """Whether Numba's cache holds an index for each kernel `module.function` named (e.g.
+    "integrator.shade"): a cheap guess that a render will load its kernels rather than compile
+    them for ~30 s (an index made from other sources, or for other types, still compiles)."""
+    import glob
+
+    root = numba.config.CACHE_DIR
+    if not root or not os.path.isdir(root):
+        return False
+    return all(glob.glob(os.path.join(glob.escape(root), "**", f"{name}-*.nbi"), recursive=True) for name in names)

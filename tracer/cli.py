@@ -1,14 +1,21 @@
 """Command line: `python -m tracer SCENE [options]` (also installed as `tracer`).
 
-Writes OUT.exr (linear), OUT.png (sRGB preview) and OUT.json (statistics). User errors
-print one line `tracer: ...` and exit with code 2.
+Writes OUT.exr (linear), OUT.png (tonemapped sRGB preview) and OUT.json (statistics). User
+errors print one line `tracer: ...` and exit with code 2; Ctrl-C writes what was rendered and
+exits with 130. Warnings found while the input is checked are held back until it has passed, so
+that a run that fails prints its one error line alone.
 """
 import argparse
 import logging
 import os
+import re
 import sys
+import tempfile
 
 from .errors import TracerError
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, what shells report for a process stopped by Ctrl-C
 
 
 class _Parser(argparse.ArgumentParser):
@@ -21,7 +28,7 @@ def _parser():
     from .guiding import guide_names
 
     p = _Parser(prog="tracer", description="Render an OBJ scene with a Numba + Embree path tracer.")
-    p.add_argument("scene", help="scene.obj (with optional scene.json beside it) or a JSON scene file")
+    p.add_argument("scene", nargs="?", help="scene.obj (with optional scene.json beside it) or a JSON scene file")
     p.add_argument("--guide", default="bsdf", help=f"bounce sampler: {', '.join(guide_names())} (default bsdf)")
     p.add_argument("--guide-opt", action="append", default=[], metavar="KEY=VALUE",
                    help="a setting of the guide, repeatable (e.g. --guide-opt iterations=6); "
@@ -39,9 +46,16 @@ def _parser():
     p.add_argument("--crop", help="render only the window x0,y0,w,h of the image")
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--wave-size", type=int, default=None, help="paths per wave (memory vs overhead)")
-    p.add_argument("-o", "--output", help="output EXR (default: <scene name>.exr in the current folder)")
+    p.add_argument("-o", "--output", help="output EXR (default: <scene name>.exr in the current folder; "
+                                          "a missing folder is created)")
     p.add_argument("--reference", help="reference EXR: print relMSE, MSE and 1-SSIM against it")
+    p.add_argument("--exposure", type=float, default=0.0, metavar="EV",
+                   help="stops added to the PNG preview's automatic exposure (default 0); the EXR is not changed")
+    p.add_argument("--variance", action="store_true",
+                   help="also write <name>.variance.exr, the variance of each pixel's mean")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary")
+    p.add_argument("--list-guides", action="store_true", help="print the guides, their settings and defaults")
+    p.add_argument("--version", action="store_true", help="print the version and exit")
     return p
 
 
@@ -49,29 +63,157 @@ def _crop(text):
     if text is None:
         return None
     try:
-        return tuple(int(v) for v in text.split(","))
+        crop = tuple(int(v) for v in text.split(","))
     except ValueError:
-        raise TracerError(f"--crop takes x0,y0,w,h (four integers), got {text!r}") from None
+        crop = ()
+    if len(crop) != 4:
+        raise TracerError(f"--crop takes x0,y0,w,h (four integers), got {text!r}")
+    return crop
 
 
-def _run(argv):
-    from . import metrics
+def _check_numbers(args):
+    """Options that are numbers out of range fail here, before anything is read or rendered."""
+    import math
+
+    checks = [("spp", 1), ("width", 1), ("height", 1), ("rr_depth", 1), ("seed", 0), ("threads", 1),
+              ("wave_size", 1)]
+    for name, lo in checks:
+        v = getattr(args, name)
+        if v is not None and v < lo:
+            raise TracerError(f"--{name.replace('_', '-')} must be >= {lo}, got {v}")
+    if args.max_depth is not None and args.max_depth < 1 and args.max_depth != -1:
+        raise TracerError(f"--max-depth must be -1 (unlimited) or >= 1, got {args.max_depth}")
+    if args.time is not None and not (math.isfinite(args.time) and args.time > 0):
+        raise TracerError(f"--time must be a positive number of seconds, got {args.time}")
+    if not math.isfinite(args.exposure):
+        raise TracerError(f"--exposure must be a finite number of stops, got {args.exposure}")
+
+
+def _output_paths(out, variance):
+    base = os.path.splitext(out)[0]
+    return [out, base + ".png", base + ".aovs.exr", base + ".json"] + ([base + ".variance.exr"] if variance else [])
+
+
+def _check_output(out, variance):
+    """Fail now, not after the render, if the outputs cannot be written: probe the folder (or,
+    if it does not exist yet, the nearest folder above it, where it will be created) by creating
+    and removing a file there; os.access says yes to root even where creating a file fails."""
+    if not out.lower().endswith(".exr"):
+        raise TracerError(f"{out}: output must be an .exr file (a PNG and a JSON are written beside it)")
+    for path in _output_paths(out, variance):
+        if os.path.isdir(path):
+            raise TracerError(f"{path}: cannot write output, a folder of that name exists")
+    folder = os.path.dirname(os.path.abspath(out))
+    probe = folder
+    while not os.path.exists(probe):
+        probe = os.path.dirname(probe)
+    if not os.path.isdir(probe):
+        raise TracerError(f"{out}: cannot write output, {probe} is not a folder")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".tracer-probe-", dir=probe)
+        os.close(fd)
+        os.remove(tmp)
+    except OSError as e:
+        raise TracerError(f"{out}: cannot write output in {probe} ({e.strerror or e})") from None
+    return folder
+
+
+def _make_folder(folder, out):
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        raise TracerError(f"{out}: cannot create the folder {folder} ({e.strerror or e})") from None
+
+
+def _read_reference(path):
+    import numpy as np
+
     from .imageio import read_image
-    from .render import DEFAULT_WAVE, render, write_outputs
+
+    ref = read_image(path, what="reference image")
+    if ref.shape[2] < 3:
+        raise TracerError(f"{path}: reference has {ref.shape[2]} channel(s), RGB needed")
+    ref = ref[:, :, :3]
+    if not np.isfinite(ref).all():
+        raise TracerError(f"{path}: reference has non-finite pixels")
+    return ref
+
+
+def _list_guides():
+    from .guiding import REGISTRY, guide_settings
+
+    for name, (factory, _) in REGISTRY.items():
+        doc = (factory.__doc__ or "").strip().splitlines()[0] if factory is not None else \
+            "BSDF importance sampling only (no guide)"
+        doc = re.sub(r"^`--guide \w+`:\s*", "", doc)
+        settings = guide_settings(name)
+        print(f"{name}: {doc}")
+        if not settings:
+            print("  (no settings)")
+        for key, value in sorted(settings.items()):
+            print(f"  {key} = {value}")
+
+
+def _compile_notice(guide, accel):
+    """One line before a render whose kernels are not in Numba's cache yet (a guess; see
+    _jit.kernels_cached), so that ~30 s of silence does not look like a hang."""
+    from . import _jit
+
+    names = ["integrator.shade"] + (["photons.scatter", "spatial.accumulate"] if guide != "bsdf" else []) + \
+        (["numba_bvh._intersect_batch"] if accel == "numba" else [])
+    if not _jit.kernels_cached(*names):
+        _note("compiling the kernels (about 30 s, once per install or update of the tracer) ...")
+
+
+def _note(text):
+    from tqdm import tqdm
+
+    tqdm.write(f"tracer: {text}", file=sys.stderr)
+
+
+class _Warnings(logging.Handler):
+    """The tracer's warnings as `tracer: warning: ...` lines on stderr, held back while `hold`
+    (until the input has been checked) and dropped if the run then fails on bad input."""
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.hold, self.held = True, []
+
+    def emit(self, record):
+        if self.hold:
+            self.held.append(record)
+        else:
+            _note(f"warning: {record.getMessage()}")
+
+    def show_held(self):  # (not `release`: logging.Handler's lock method)
+        self.hold = False
+        for record in self.held:
+            self.emit(record)
+        self.held = []
+
+
+def _run(argv, warnings):
+    from . import metrics
+    from .render import DEFAULT_WAVE, _check_crop, render, write_outputs
     from .scene import load_scene
 
     args = _parser().parse_args(argv)
+    if args.version:
+        from . import __version__
+
+        print(f"tracer {__version__}")
+        return 0
+    if args.list_guides:
+        _list_guides()
+        return 0
+    if args.scene is None:
+        raise TracerError("the following arguments are required: scene (see --help)")
+    _check_numbers(args)
+    crop = _crop(args.crop)
     overrides = {k: getattr(args, k) for k in ("width", "height") if getattr(args, k) is not None}
-    for k in ("width", "height"):
-        if k in overrides and overrides[k] < 1:
-            raise TracerError(f"--{k} must be >= 1, got {overrides[k]}")
     out = args.output or os.path.splitext(os.path.basename(args.scene))[0] + ".exr"
-    if not out.lower().endswith(".exr"):
-        raise TracerError(f"{out}: output must be an .exr file (a PNG and a JSON are written beside it)")
-    out_dir = os.path.dirname(os.path.abspath(out))
-    if not os.path.isdir(out_dir) or not os.access(out_dir, os.W_OK):
-        raise TracerError(f"{out}: cannot write output, folder {out_dir} is missing or not writable")
-    ref = read_image(args.reference, what="reference image") if args.reference else None
+    out_dir = _check_output(out, args.variance)
+    ref = _read_reference(args.reference) if args.reference else None
 
     from .bvh import ACCELS
     from .errors import unknown_name
@@ -82,29 +224,42 @@ def _run(argv):
     guide_settings = _guide_opts(args.guide_opt)
     make_guide(args.guide, **guide_settings)  # unknown names and settings fail here, before the scene loads
     scene = load_scene(args.scene, **overrides)
-    if ref is not None and ref.shape[:2] != (scene.height, scene.width):
-        raise TracerError(
-            f"{args.reference}: reference is {ref.shape[1]}x{ref.shape[0]}, the render {scene.width}x{scene.height}"
-        )
-    if ref is not None and args.crop:
-        x0, y0, w, h = _crop(args.crop)
-        ref = ref[y0:y0 + h, x0:x0 + w]
+    crop = _check_crop(crop, scene.width, scene.height) if crop is not None else None
+    if ref is not None:
+        if ref.shape[:2] != (scene.height, scene.width):
+            raise TracerError(
+                f"{args.reference}: reference is {ref.shape[1]}x{ref.shape[0]}, the render {scene.width}x{scene.height}"
+            )
+        if crop is not None:
+            x0, y0, w, h = crop
+            ref = ref[y0:y0 + h, x0:x0 + w]
+        if min(ref.shape[:2]) < 3:
+            raise TracerError(f"{args.reference}: the {ref.shape[1]}x{ref.shape[0]} window is too small for "
+                              "1-SSIM (at least 3x3)")
+    _make_folder(out_dir, out)
+    warnings.show_held()  # the input is good: show what loading it found
+    if not args.quiet:
+        _compile_notice(args.guide, args.accel)
     result = render(scene, spp=args.spp, time=args.time, guide=args.guide, guide_settings=guide_settings,
                     max_depth=args.max_depth,
                     rr_depth=args.rr_depth, seed=args.seed, accel=args.accel, threads=args.threads,
-                    pixel_filter=args.filter, crop=_crop(args.crop),
+                    pixel_filter=args.filter, crop=crop,
                     wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet)
     if ref is not None:
-        result.stats["metrics"] = metrics.all_metrics(result.image, ref[:, :, :3])
-    exr, png, js = write_outputs(result, out)
+        result.stats["metrics"] = metrics.all_metrics(result.image, ref)
+    exr, png, js = write_outputs(result, out, exposure=args.exposure, variance=args.variance)
+    s = result.stats
     if not args.quiet:
-        s = result.stats
-        note = " (interrupted)" if s["interrupted"] else ""
-        print(f"{exr}: {s['width']}x{s['height']}, {s['spp']} spp in {s['time_total']:.2f} s{note}, "
+        if s["interrupted"]:
+            note = f" (interrupted; every pixel has at least {s['spp']})" if s["spp_mean"] != s["spp"] else \
+                " (interrupted)"
+        else:
+            note = ""
+        print(f"{exr}: {s['width']}x{s['height']}, {s['spp_mean']:.0f} spp{note} in {s['time_total']:.2f} s, "
               f"{s['msamples_per_s']:.2f} Msamples/s, {s['mrays_per_s']:.2f} Mrays/s; preview {png}, stats {js}")
         if ref is not None:
             print("  ".join(f"{k} {v:.6g}" for k, v in s["metrics"].items()))
-    return 0
+    return EXIT_INTERRUPTED if s["interrupted"] else 0
 
 
 def _guide_opts(items):
@@ -127,8 +282,23 @@ def _guide_opts(items):
 
 def main(argv=None):
     logging.basicConfig(format="tracer: warning: %(message)s", level=logging.WARNING, stream=sys.stderr)
+    log = logging.getLogger("tracer")
+    saved = log.propagate, log.level
+    warnings = _Warnings()
+    log.addHandler(warnings)
+    log.propagate = False
+    log.setLevel(logging.WARNING)
     try:
-        return _run(sys.argv[1:] if argv is None else argv)
+        return _run(sys.argv[1:] if argv is None else argv, warnings)
     except TracerError as e:
         print(f"tracer: {e}", file=sys.stderr)
-        return 2
+        return EXIT_USAGE
+    except BrokenPipeError:  # stdout closed early (`tracer --list-guides | head`)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    except KeyboardInterrupt:  # before the passes began, or while writing (each file is whole or old)
+        print("tracer: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        log.removeHandler(warnings)
+        log.propagate, log.level = saved

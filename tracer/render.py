@@ -4,11 +4,13 @@ A render runs as passes over the whole image; each pass renders some samples per
 in waves of at most `wave_size` paths (memory stays flat with image size). Between passes a
 callback may look at the film (guides learn there). With `time=S` the passes continue,
 doubling in size, until the next one would not fit in the budget. Ctrl-C stops the render
-between waves and returns what was rendered so far.
+between waves and returns what was rendered so far (see render()).
 """
 import json
 import math
 import os
+import signal
+import threading
 import time as _time
 from dataclasses import dataclass, field
 
@@ -22,6 +24,7 @@ from .guiding import make_guide, warm_up_guides
 from .guiding.spatial import empty_state
 from .integrator import Stats, WaveBuffers, trace_wave, warm_up_splitting
 from .lights import build_lights
+from .provenance import provenance
 
 DEFAULT_WAVE = 1 << 16
 FILTERS = ("box", "point")
@@ -106,6 +109,17 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     training iterations of 2^t spp (each followed by the guide's update), then a final guided
     pass with what the budget has left; the image combines the training iterations and the final
     pass weighted by the inverse of each one's mean pixel variance (the pilot is not used).
+
+    Ctrl-C (SIGINT, when render runs in the main thread) stops the render before the next wave:
+    the wave in flight finishes, and a second Ctrl-C stops at once. The result then has
+    stats["interrupted"] True, and the waves finished in the unfinished pass stay in the image:
+    each pixel is the mean of the samples it got, so some pixels have one more than others.
+    stats["spp"] counts the finished passes (every pixel has at least that many samples),
+    stats["spp_mean"] all samples / pixels (what the progress bar shows). A film that some
+    pixel has fewer than 2 samples of gets no weight when films are combined (combine_films).
+
+    stats also records tracer_version, git_commit (HEAD of the package's checkout, "-dirty" with
+    changes to tracked files, None without git), command_line (sys.argv) and date (ISO 8601).
     """
     rs = scene.render
     max_depth = rs.max_depth if max_depth is None else max_depth
@@ -166,8 +180,16 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
         bar = tqdm(total=spp if time is None else None, unit="spp", desc="render", leave=False,
                    bar_format="{l_bar}{bar}| {n:.0f}/{total_fmt} spp [{elapsed}<{remaining}]"
                    if time is None else "{desc}: {n:.0f} spp [{elapsed}, budget %gs]" % time)
+    learns = g is not None and getattr(g, "learns", True)
+
+    def phase(name):
+        """The bar's description: pilot, train t/T, final (a guide that learns), else render."""
+        if bar is not None and learns:
+            bar.set_description(name)
+
     settings = {"accel": acc.name, "threads": int(n_threads), "seed": int(seed), "max_depth": int(max_depth),
-                "rr_depth": int(rr_depth), "guide": guide, "pixel_filter": pixel_filter, "crop": list(crop)}
+                "rr_depth": int(rr_depth), "guide": guide, "pixel_filter": pixel_filter, "crop": list(crop),
+                "wave_size": int(wave_size), **provenance()}
     state = {"sample0": 0}
 
     def snapshot():
@@ -178,6 +200,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
         tp = _time.perf_counter()
         total = pass_spp * npix
         for g0 in range(0, total, buf.size):
+            if sigint.requested:
+                raise KeyboardInterrupt  # between waves: every finished wave is whole in the film
             n = min(buf.size, total - g0)
             trace_wave(ctx, buf, film, state["sample0"], g0, n, stats, observe=g.observe if learn else None,
                        direct=getattr(g, "learn_direct", True), split=split)
@@ -196,11 +220,14 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
 
     interrupted = False
     final = Film(crop[2], crop[3])
+    sigint = _Sigint()
     t_render = _time.perf_counter()
     try:
-        if g is not None and getattr(g, "learns", True):
+        sigint.install()
+        if learns:
             # Pilot (1 spp, unguided), then training iterations of 2^t N_c spp while they fit
             films.append((Film(crop[2], crop[3]), "pilot"))
+            phase("pilot")
             run_pass(films[-1][0], 1, "pilot", True)
             for t in range(1, g.iterations + 1):
                 n = g.spp_init * 2 ** t
@@ -214,11 +241,13 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                     if elapsed + 2.0 * est > time or elapsed + est > getattr(g, "train_budget", 1.0) * time:
                         break
                 films.append((Film(crop[2], crop[3]), "train"))
+                phase(f"train {t}/{g.iterations}")
                 run_pass(films[-1][0], n, "train", True)
         # The final pass(es): the guide frozen; in doubling passes that fit the budget
         if window > 0.0:
             ctx.window = _weight_window(g, [f for f, _ in films], crop)
         films.append((final, "final"))
+        phase("final")
         pass_spp = passes[-1]["spp"] if passes else 1
         first_final = len(passes)
         while True:
@@ -239,7 +268,11 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     except (KeyboardInterrupt, _Stop) as e:
         interrupted = isinstance(e, KeyboardInterrupt)
     finally:
+        sigint.restore()
+        interrupted = interrupted or sigint.requested  # also when Ctrl-C came during the last wave
         if bar is not None:
+            bar.n = stats.samples / npix  # what it showed, to the last wave, as stats["spp_mean"]
+            bar.refresh()
             bar.close()
     st = snapshot()
     st["interrupted"] = interrupted
@@ -255,6 +288,31 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
 
 class _Stop(Exception):
     """A callback asked the render to stop."""
+
+
+class _Sigint:
+    """Ctrl-C during the passes: the first SIGINT sets `requested` (the render stops before its
+    next wave), and puts Python's handler back, so that a second one interrupts at once. Only in
+    the main thread, and only over Python's default handler (a program's own is left alone)."""
+
+    def __init__(self):
+        self.requested = False
+        self._installed = False
+
+    def install(self):
+        if threading.current_thread() is threading.main_thread() and \
+                signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            signal.signal(signal.SIGINT, self._handle)
+            self._installed = True
+
+    def _handle(self, signum, frame):
+        self.requested = True
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    def restore(self):
+        if self._installed:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            self._installed = False
 
 
 def _weight_window(g, films, crop):
@@ -326,6 +384,7 @@ def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile, gu
         "width": settings["crop"][2],
         "height": settings["crop"][3],
         "spp": int(spp),
+        "spp_mean": samples / (settings["crop"][2] * settings["crop"][3]),
         "passes": [dict(p) for p in passes],
         "samples": int(samples),
         "rays": int(rays),
@@ -343,26 +402,41 @@ def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile, gu
         **settings,
         "guide_memory_bytes": int(guide.peak_memory) if guide is not None else 0,
         "guide_time_learning": float(guide.time_learning) if guide is not None else 0.0,
-        "guide_time_inference": float(guide.time_inference) if guide is not None else 0.0,
+        # the maps' rebuild between passes, and network inference (0 for guides without a network)
+        "guide_time_update": float(getattr(guide, "time_update", 0.0)) if guide is not None else 0.0,
+        "guide_time_inference": float(getattr(guide, "time_inference", 0.0)) if guide is not None else 0.0,
         "guide_stats": guide.stats() if guide is not None else {},
     }
 
 
-def write_outputs(result, path):
-    """Write `path` (EXR, RGB), a PNG preview, `<name>.aovs.exr` (albedo, normal, depth) and a
-    stats JSON beside it; returns the paths of the EXR, the PNG and the JSON."""
-    from .imageio import write_image
+def write_outputs(result, path, exposure=0.0, variance=False):
+    """Write `path` (EXR, RGB, linear), a PNG preview, `<name>.aovs.exr` (albedo, normal, depth),
+    with `variance` `<name>.variance.exr` (result.variance, the variance of each pixel's mean), and
+    a stats JSON beside it; returns the paths of the EXR, the PNG and the JSON.
+
+    The PNG is imageio.tonemap(image, exposure): automatic exposure (log-average luminance to
+    middle grey) plus `exposure` stops, the ACES filmic curve, sRGB; the JSON records the stops applied
+    (preview_exposure). Each file is written under a temporary name and renamed into place."""
+    from .imageio import auto_exposure, replace_atomically, tonemap, write_image
 
     base, ext = os.path.splitext(os.fspath(path))
     if ext.lower() != ".exr":
         raise SettingsError(f"{path}: output must be an .exr file (a PNG and a JSON are written beside it)")
     write_image(path, result.image)
     png = base + ".png"
-    write_image(png, result.image)
+    write_image(png, tonemap(result.image, exposure))
     a = result.aovs
     write_image(base + ".aovs.exr", np.concatenate([a["albedo"], a["normal"], a["depth"]], axis=2),
                 channel_names=("albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z"))
+    if variance:
+        write_image(base + ".variance.exr", result.variance)
     js = base + ".json"
-    with open(js, "w", encoding="utf-8") as f:
-        json.dump(result.stats, f, indent=1)
+    stats = dict(result.stats, preview_exposure=float(exposure) + math.log2(auto_exposure(result.image)))
+    text = json.dumps(stats, indent=1)
+
+    def write_json(tmp):
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(text)
+
+    replace_atomically(js, write_json)
     return path, png, js

@@ -176,99 +176,125 @@ def _number(where, value, kind=float, lo=None):
     return value
 
 
+def read_text(path, what):
+    """The text of an OBJ or MTL file: UTF-8 (with or without a BOM), else the encoding
+    charset_normalizer finds most likely (a Latin-1 comment is common in exported files)."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except FileNotFoundError:
+        raise SceneError(f"{path}: {what} file not found") from None
+    except OSError as e:
+        raise SceneError(f"{path}: cannot read {what} ({e.strerror})") from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        pass
+    import charset_normalizer
+
+    best = charset_normalizer.from_bytes(data).best()
+    return str(best) if best is not None else data.decode("latin-1")
+
+
+@dataclass
+class ObjScan:
+    """What scan_obj learned: the decoded text, the `mtllib` file names and the `usemtl` names
+    (in order of first use)."""
+
+    text: str
+    mtllibs: list
+    usemtl: list
+
+
 def scan_obj(path):
     """Validate an OBJ line by line before trimesh reads it, so that errors name the line.
 
     Checks that `v` lines hold three finite numbers and `f` lines hold vertex indices that
-    exist. Returns the list of `mtllib` file names.
+    exist. Returns an ObjScan (text, `mtllib` file names, `usemtl` names).
     """
-    mtllibs = []
+    text = read_text(path, "OBJ")
+    mtllibs, usemtl = [], {}
     nv = 0
-    try:
-        f = open(path, encoding="utf-8", errors="replace")
-    except FileNotFoundError:
-        raise SceneError(f"{path}: OBJ file not found") from None
-    except OSError as e:
-        raise SceneError(f"{path}: cannot read OBJ ({e.strerror})") from None
-    with f:
-        for lineno, line in enumerate(f, 1):
-            parts = line.split()
-            if not parts or parts[0].startswith("#"):
-                continue
-            key = parts[0]
-            if key == "v":
+    for lineno, line in enumerate(text.splitlines(), 1):
+        parts = line.split()
+        if not parts or parts[0].startswith("#"):
+            continue
+        key = parts[0]
+        if key == "v":
+            try:
+                xyz = [float(x) for x in parts[1:4]]
+            except ValueError:
+                xyz = []
+            if len(xyz) != 3:
+                raise SceneError(f"{path}:{lineno}: malformed vertex line {line.strip()!r}")
+            if not all(math.isfinite(x) for x in xyz):
+                raise SceneError(f"{path}:{lineno}: vertex is not finite: {line.strip()!r}")
+            nv += 1
+        elif key == "f":
+            if len(parts) < 4:
+                raise SceneError(f"{path}:{lineno}: a face needs at least 3 vertices: {line.strip()!r}")
+            for item in parts[1:]:
                 try:
-                    xyz = [float(x) for x in parts[1:4]]
+                    idx = int(item.split("/")[0])
                 except ValueError:
-                    xyz = []
-                if len(xyz) != 3:
-                    raise SceneError(f"{path}:{lineno}: malformed vertex line {line.strip()!r}")
-                if not all(math.isfinite(x) for x in xyz):
-                    raise SceneError(f"{path}:{lineno}: vertex is not finite: {line.strip()!r}")
-                nv += 1
-            elif key == "f":
-                if len(parts) < 4:
-                    raise SceneError(f"{path}:{lineno}: a face needs at least 3 vertices: {line.strip()!r}")
-                for item in parts[1:]:
-                    try:
-                        idx = int(item.split("/")[0])
-                    except ValueError:
-                        raise SceneError(f"{path}:{lineno}: malformed face line {line.strip()!r}") from None
-                    if idx == 0 or idx > nv or -idx > nv:
-                        raise SceneError(
-                            f"{path}:{lineno}: face refers to vertex {idx}, but {nv} vertices are defined"
-                        )
-            elif key == "mtllib":
-                mtllibs.extend(parts[1:])
-    return mtllibs
+                    raise SceneError(f"{path}:{lineno}: malformed face line {line.strip()!r}") from None
+                if idx == 0 or idx > nv or -idx > nv:
+                    raise SceneError(
+                        f"{path}:{lineno}: face refers to vertex {idx}, but {nv} vertices are defined"
+                    )
+        elif key == "mtllib":
+            mtllibs.extend(parts[1:])
+        elif key == "usemtl" and len(parts) > 1:
+            usemtl.setdefault(" ".join(parts[1:]), None)
+    return ObjScan(text, mtllibs, list(usemtl))
 
 
 def parse_mtl(path, warnings):
     """Read an MTL file into {name: {statement: [floats]}}; report what is ignored."""
     mats = {}
     ignored = {}
+    missing = {}  # texture file name -> first line that names it
     cur = None
-    try:
-        f = open(path, encoding="utf-8", errors="replace")
-    except FileNotFoundError:
-        raise SceneError(f"{path}: MTL file not found") from None
-    with f:
-        for lineno, line in enumerate(f, 1):
-            parts = line.split()
-            if not parts or parts[0].startswith("#"):
-                continue
-            key, args = parts[0], parts[1:]
-            if key == "newmtl":
-                if not args:
-                    raise SceneError(f"{path}:{lineno}: newmtl without a name")
-                cur = " ".join(args)
-                mats[cur] = {}
-                continue
-            if cur is None:
-                raise SceneError(f"{path}:{lineno}: {key!r} before any newmtl")
-            if key.startswith("map_") or key in ("bump", "disp", "decal", "refl", "norm"):
-                tex = os.path.join(os.path.dirname(path), args[-1]) if args else ""
-                if not args or not os.path.isfile(tex):
-                    raise SceneError(f"{path}:{lineno}: texture {args[-1] if args else ''!r} not found")
-                ignored.setdefault(key + " (textures are not supported; the constant is used)", set()).add(cur)
-                continue
-            if key not in _MTL_USED:
-                ignored.setdefault(key, set()).add(cur)
-                continue
-            try:
-                vals = [float(a) for a in args]
-            except ValueError:
-                raise SceneError(f"{path}:{lineno}: malformed {key} line {line.strip()!r}") from None
-            if not vals or not all(math.isfinite(v) for v in vals):
-                raise SceneError(f"{path}:{lineno}: malformed {key} line {line.strip()!r}")
-            if key in ("Kd", "Ks", "Ke"):
-                if len(vals) == 1:
-                    vals = vals * 3
-                if len(vals) != 3 or min(vals) < 0.0:
-                    raise SceneError(f"{path}:{lineno}: {key} needs three non-negative numbers")
-            mats[cur][key] = vals
+    for lineno, line in enumerate(read_text(path, "MTL").splitlines(), 1):
+        parts = line.split()
+        if not parts or parts[0].startswith("#"):
+            continue
+        key, args = parts[0], parts[1:]
+        if key == "newmtl":
+            if not args:
+                raise SceneError(f"{path}:{lineno}: newmtl without a name")
+            cur = " ".join(args)
+            mats[cur] = {}
+            continue
+        if cur is None:
+            raise SceneError(f"{path}:{lineno}: {key!r} before any newmtl")
+        if key.startswith("map_") or key in ("bump", "disp", "decal", "refl", "norm"):
+            # textures are replaced by the constant whether or not their file exists
+            if not args or not os.path.isfile(os.path.join(os.path.dirname(path), args[-1])):
+                missing.setdefault(args[-1] if args else "", lineno)
+            ignored.setdefault(key + " (textures are not supported; the constant is used)", set()).add(cur)
+            continue
+        if key not in _MTL_USED:
+            ignored.setdefault(key, set()).add(cur)
+            continue
+        try:
+            vals = [float(a) for a in args]
+        except ValueError:
+            raise SceneError(f"{path}:{lineno}: malformed {key} line {line.strip()!r}") from None
+        if not vals or not all(math.isfinite(v) for v in vals):
+            raise SceneError(f"{path}:{lineno}: malformed {key} line {line.strip()!r}")
+        if key in ("Kd", "Ks", "Ke"):
+            if len(vals) == 1:
+                vals = vals * 3
+            if len(vals) != 3 or min(vals) < 0.0:
+                raise SceneError(f"{path}:{lineno}: {key} needs three non-negative numbers")
+        mats[cur][key] = vals
     for key, names in sorted(ignored.items()):
         _warn(warnings, f"{path}: ignoring unsupported statement {key} in {len(names)} material(s)")
+    if missing:
+        files = ", ".join(f"{name!r} (line {line})" for name, line in list(missing.items())[:3])
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        _warn(warnings, f"{path}: texture file(s) not found: {files}{more}; the constant is used anyway")
     return mats
 
 
@@ -342,12 +368,26 @@ def _material_override(name, spec, base, where):
     return mtype, param, emission
 
 
-def _load_geometry(obj_path, mtl_names):
-    """Triangle soup (F,3,3) and per-triangle material names through trimesh."""
+def _load_geometry(obj_path, scan):
+    """Triangle soup (F,3,3) and [(usemtl name or None, face count)] through trimesh.
+
+    trimesh reads the text scan_obj decoded, and instead of the OBJ's MTL files a stand-in that
+    defines every `usemtl` name: trimesh forgets the name of a material its MTL lacks (and would
+    load textures), while the tracer reads the MTL files itself."""
+    import io
+
     import trimesh
 
+    stand_in = "".join(f"newmtl {name}\nKd 0.8 0.8 0.8\n" for name in scan.usemtl).encode("utf-8")
+
+    class _StandInMTL(trimesh.resolvers.FilePathResolver):
+        def get(self, name):
+            return stand_in
+
     try:
-        tm = trimesh.load(obj_path, file_type="obj", process=False, maintain_order=True, force="scene")
+        text = "mtllib stand-in.mtl\n" + scan.text  # (trimesh reads the first mtllib, and none without one)
+        tm = trimesh.load(io.BytesIO(text.encode("utf-8")), file_type="obj", process=False,
+                          maintain_order=True, force="scene", resolver=_StandInMTL(obj_path))
     except Exception as e:  # trimesh raises many kinds; the pre-scan catches the common ones
         raise SceneError(f"{obj_path}: cannot read OBJ ({type(e).__name__}: {e})") from None
     tris, names = [], []
@@ -403,32 +443,48 @@ def load_scene(path, **overrides):
             _check_keys(f"{sidecar_path}: {section}", sidecar[section], allowed)
 
     # Geometry and materials
-    mtllibs = scan_obj(obj_path)
+    scan = scan_obj(obj_path)
     mtl = {}
-    for lib in mtllibs:
+    for lib in scan.mtllibs:
         mtl_path = os.path.join(os.path.dirname(obj_path), lib)
         if not os.path.isfile(mtl_path):
             raise SceneError(f"{obj_path}: MTL file {lib!r} not found (looked for {mtl_path})")
         mtl.update(parse_mtl(mtl_path, warnings))
-    tri, groups = _load_geometry(obj_path, mtl)
+    tri, groups = _load_geometry(obj_path, scan)
     names = list(mtl)
     types, params, emissions = [], [], []
     for n in names:
         t, p, e = material_from_mtl(n, mtl[n], obj_path, warnings)
         types.append(t), params.append(p), emissions.append(e)
+    # A usemtl name no MTL defines gets a material of its own (diffuse 0.8, which the sidecar may
+    # override by that name); faces before any usemtl get "__default__".
+    undefined = []
     tri_material = np.empty(tri.shape[0], dtype=np.int32)
     start = 0
     for mname, count in groups:
-        if mname not in mtl:
-            if "__default__" not in names:
-                _warn(warnings, f"{obj_path}: faces without a known material (usemtl {mname!r}); using diffuse 0.8")
-                names.append("__default__")
-                types.append(bsdfs.DIFFUSE)
-                params.append(np.array([0.8, 0.8, 0.8, 0, 0, 0, 0, 1.5]))
-                emissions.append(np.zeros(3))
+        if mname is None:
             mname = "__default__"
+            if mname not in names:
+                _warn(warnings, f"{obj_path}: faces without a material (no usemtl before them); using diffuse 0.8")
+        elif mname not in mtl and mname not in undefined:
+            undefined.append(mname)
+        if mname not in names:
+            names.append(mname)
+            types.append(bsdfs.DIFFUSE)
+            params.append(np.array([0.8, 0.8, 0.8, 0, 0, 0, 0, 1.5]))
+            emissions.append(np.zeros(3))
         tri_material[start : start + count] = names.index(mname)
         start += count
+    undefined = [n for n in scan.usemtl if n in undefined]  # in the order the OBJ uses them
+    libs = ", ".join(scan.mtllibs)
+    where = f"in {libs}" if libs else "(the OBJ names no MTL file)"
+    overridden = set(sidecar.get("materials") or {})
+    unreported = [n for n in undefined if n not in overridden]
+    if unreported:
+        listed = ", ".join(repr(n) for n in unreported[:5]) + (f" and {len(unreported) - 5} more" if len(unreported) > 5 else "")
+        verb = "is" if len(unreported) == 1 else "are"
+        _warn(warnings, f"{obj_path}: material{'s' if len(unreported) > 1 else ''} {listed} {verb} not defined {where}; "
+                        "using diffuse 0.8")
     # Sidecar material overrides
     for name, spec in (sidecar.get("materials") or {}).items():
         if name not in names:
@@ -512,8 +568,11 @@ def load_scene(path, **overrides):
     )
     has_env = environment is not None and (environment.image is not None or environment.radiance.max() > 0)
     if not scene.emissive.any() and not has_env:
+        hint = ""
+        if undefined:  # its emitter may be among them (the warning is not shown when loading fails)
+            hint = f" ({', '.join(repr(n) for n in undefined[:5])} not defined {where})"
         raise SceneError(
-            f"{scene.path}: the scene has no light: no material with Ke > 0 and no environment in the sidecar"
+            f"{scene.path}: the scene has no light: no material with Ke > 0 and no environment in the sidecar{hint}"
         )
     return scene
 

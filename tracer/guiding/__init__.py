@@ -98,7 +98,7 @@ class FrozenGuide:
         self._outgoing = guide.window_estimates() if hasattr(guide, "window_estimates") else None
         self._state = guide.state()
         self.peak_memory = guide.memory_bytes()
-        self.time_learning = self.time_inference = 0.0
+        self.time_learning = self.time_update = self.time_inference = 0.0
 
     def prepare(self, scene, ctx):
         pass

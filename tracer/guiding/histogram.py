@@ -218,8 +218,9 @@ class HistogramGuide:
         self.iteration = 0
         self._state = empty_state(self.map_height, self.map_width)
         self._pilot = []
-        self.time_learning = 0.0
-        self.time_inference = 0.0
+        self.time_learning = 0.0  # observing records, photons, splits (update's first part)
+        self.time_update = 0.0  # rebuilding the maps between passes: reconstruct, tables, weights
+        self.time_inference = 0.0  # network inference: none in these guides
         self.peak_memory = 0
         self.info = {"photons": 0, "deposits": 0, "photon_rays": 0, "vertices": 0}
         self._mom = self._mom_n = None
@@ -268,7 +269,7 @@ class HistogramGuide:
             self._after_reconstruct()
             self._state = self.grid.state()
             self.peak_memory = max(self.peak_memory, self.memory_bytes())
-        self.time_inference += time.perf_counter() - t1
+        self.time_update += time.perf_counter() - t1
         self.iteration += 1
 
     def fixed_state(self, sampling_map):
