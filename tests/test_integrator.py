@@ -4,7 +4,7 @@ import pytest
 
 import tracer
 from tests import scenes
-from tests.stats import assert_z, image_mean
+from tests.stats import assert_clean, assert_z, image_mean
 
 ACCELS = ["embree", "numba"]
 
@@ -15,6 +15,7 @@ def test_closed_box_reads_le_over_one_minus_albedo(tmp_path, accel):
     a, le = 0.6, 1.5
     scene = tracer.load_scene(scenes.closed_box(tmp_path, a, le, width=16, height=16))
     r = tracer.render(scene, spp=64, accel=accel, max_depth=-1, rr_depth=3)
+    assert_clean(r)
     mean, var = image_mean(r)
     assert_z(mean, var, le / (1 - a), n_tests=6, what="closed box radiance")
 
@@ -25,6 +26,7 @@ def test_max_depth_follows_mitsuba(tmp_path, max_depth):
     a, le = 0.5, 1.0
     scene = tracer.load_scene(scenes.closed_box(tmp_path, a, le, width=16, height=16))
     r = tracer.render(scene, spp=32, max_depth=max_depth, rr_depth=100)
+    assert_clean(r)
     expected = le * sum(a**k for k in range(max_depth))
     mean, var = image_mean(r)
     if max_depth == 1:
@@ -37,6 +39,7 @@ def test_light_seen_directly_reads_its_radiance(tmp_path):
     le = (3.0, 2.0, 0.5)
     scene = tracer.load_scene(scenes.light_quad(tmp_path, le))
     r = tracer.render(scene, spp=4)
+    assert_clean(r)
     np.testing.assert_allclose(r.image.reshape(-1, 3), np.broadcast_to(le, (64, 3)), rtol=1e-6)
     assert np.all(r.variance == 0)
 
@@ -50,11 +53,13 @@ def test_light_back_side_is_black(tmp_path):
     cam = scene.camera
     scene.camera = Camera.look_at(-cam.origin, [0, 0, 0], [0, 1, 0], 30.0, "x", scene.width, scene.height)
     r = tracer.render(scene, spp=2)
+    assert_clean(r)
     assert np.all(r.image == 0)
 
 
 def _sky_test(scene, albedo, radiance, spp, what):
     r = tracer.render(scene, spp=spp)
+    assert_clean(r, what)
     alb = r.aovs["albedo"][:, :, 0]
     ball = np.isclose(alb, albedo, atol=1e-6)  # every sample of the pixel hit the sphere
     sky = alb == 0.0  # no sample hit

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import tracer
+from tests.stats import assert_clean
 
 SCENES_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
 NAMES = ["cornell", "ajar", "glossy", "caustic", "manylights", "window", "spotlit"]
@@ -32,7 +33,8 @@ def test_scene_loads_and_renders(name):
         film = json.load(f)["film"]
     height = max(1, round(64 * film["height"] / film["width"]))
     small = tracer.load_scene(obj_path(name), width=64, height=height)
-    image = tracer.render(small, spp=SPP.get(name, 1)).image
+    r = tracer.render(small, spp=SPP.get(name, 1))
+    assert_clean(r, name)
+    image = r.image
     assert image.shape == (height, 64, 3)
-    assert np.all(np.isfinite(image))
     assert image.max() > 0
