@@ -18,6 +18,7 @@ import numba
 import numpy as np
 
 from .bvh import make_accel, ray_offsets
+from .bvh.numba_bvh import _NumbaThreads
 from .errors import SettingsError, unknown_name
 from .film import Film
 from .guiding import make_guide, warm_up_guides
@@ -120,7 +121,23 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
 
     stats also records tracer_version, git_commit (HEAD of the package's checkout, "-dirty" with
     changes to tracked files, None without git), command_line (sys.argv) and date (ISO 8601).
+
+    Determinism: a render is a function of its settings, bit for bit, whatever the thread count.
+    The wave size does not change it either, except where a guide splits paths (`split`, `window`):
+    copies are made only into free room of the wave's buffer, so a smaller wave makes fewer of them
+    (each choice is unbiased; tests/guiding/test_guides.py).
     """
+    if threads is not None:
+        threads = _int_setting("threads", threads, 1)
+    n_threads = min(threads or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS)
+    with _NumbaThreads(n_threads):  # every kernel of this render on n_threads, restored after
+        return _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress,
+                       callback, guide_settings, pixel_filter, crop)
+
+
+def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress, callback,
+            guide_settings, pixel_filter, crop):
+    """render() on n_threads Numba threads."""
     rs = scene.render
     max_depth = rs.max_depth if max_depth is None else max_depth
     rr_depth = rs.rr_depth if rr_depth is None else rr_depth
@@ -143,10 +160,6 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
         g, guide = guide, getattr(guide, "name", type(guide).__name__)
         if guide_settings:
             raise SettingsError("guide_settings go with a guide name, not with a guide object")
-    if threads is not None:
-        threads = _int_setting("threads", threads, 1)
-        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-    n_threads = threads or numba.config.NUMBA_NUM_THREADS
 
     t_start = _time.perf_counter()
     acc = make_accel(accel, scene.tri, threads=n_threads)
