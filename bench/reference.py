@@ -39,6 +39,7 @@ import numpy as np
 from scipy import stats
 
 import tracer
+from tracer.imageio import tonemap
 from tracer.provenance import git_commit
 
 from . import atomic
@@ -173,7 +174,7 @@ def main(argv=None):
     atomic.write_all([
         (os.path.join(out, "reference.exr"),
          atomic.image_writer(np.concatenate([mean, var], axis=2), channel_names=CHANNELS)),
-        (os.path.join(out, "reference.png"), atomic.image_writer(mean)),
+        (os.path.join(out, "reference.png"), atomic.image_writer(tonemap(mean))),  # the preview, as the CLI
         (os.path.join(out, "reference.json"), atomic.text_writer(json.dumps(meta, indent=1))),
     ])
     print(f"{out}/reference.exr: {spp} spp, {total_seconds:.0f} s, noise floor relMSE {meta['noise_floor_relmse']:.3g}")
