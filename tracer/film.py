@@ -6,6 +6,8 @@ sums of the AOVs (albedo, shading normal, depth at the first hit). Samples are a
 sample-index order, so the float64 sums, and the image, do not depend on wave size or
 thread count.
 """
+import math
+
 import numpy as np
 
 from ._jit import jit
@@ -30,9 +32,14 @@ class Film:
     def n_pixels(self):
         return self.width * self.height
 
-    def add(self, pixel, radiance, aov):
-        """Add samples: pixel (n,) int64, radiance (n,3) float64, aov (n, N_AOV) float64, in order."""
-        _accumulate(self.count, self.sum, self.sumsq, self.aov, pixel, radiance, aov)
+    def add(self, pixel, radiance, aov, weight=None):
+        """Add samples, in order: pixel (n,) int64, radiance (n,3) float64, aov (n, N_AOV) float64,
+        weight (n,) float64 or None (1): each sample's value is weight x radiance. The sink
+        interface of tracer.integrator.trace_wave."""
+        if weight is None:
+            _accumulate(self.count, self.sum, self.sumsq, self.aov, pixel, radiance, aov)
+        else:
+            _accumulate_weighted(self.count, self.sum, self.sumsq, self.aov, pixel, radiance, aov, weight)
 
     def mean(self):
         """(H, W, 3) float64 per-pixel mean (0 where no sample yet)."""
@@ -58,6 +65,39 @@ class Film:
         return f"Film({self.width}x{self.height}, {int(self.count.sum())} samples)"
 
 
+def combine_films(films, kinds=None):
+    """One image from independent renders of the same pixels: weighted by the inverse of each
+    film's mean pixel variance (Mueller 2019), films with fewer than 2 spp in some pixel left out
+    unless nothing else has samples. Returns (image (H,W,3), variance of it, weights)."""
+    kinds = kinds or ["final"] * len(films)
+    usable = [f.count.size and f.count.min() >= 2 for f in films]
+    if not any(usable):  # e.g. a 1-spp render: the films are summed sample by sample
+        total = Film(films[0].width, films[0].height)
+        for f in films:
+            total.count += f.count
+            total.sum += f.sum
+            total.sumsq += f.sumsq
+        return total.mean(), total.variance(), [1.0 if f.count.max() > 0 else 0.0 for f in films]
+    means, vars_, weights = [], [], []
+    for f, ok, kind in zip(films, usable, kinds):
+        if not ok or (kind == "pilot" and sum(usable) > 1):
+            weights.append(0.0)
+            continue
+        v = f.variance()
+        mv = float(v.mean())
+        means.append(f.mean())
+        vars_.append(v)
+        weights.append(1.0 / mv if mv > 0 else math.inf)
+    w = np.array([x for x in weights if x > 0.0])
+    if np.isinf(w).any():  # noiseless films (a black image): by samples instead
+        w = np.array([float(f.count.sum()) for f, x in zip(films, weights) if x > 0.0])
+    w = w / w.sum()
+    image = sum(wi * m for wi, m in zip(w, means))
+    variance = sum(wi * wi * v for wi, v in zip(w, vars_))
+    it = iter(w)
+    return image, variance, [float(next(it)) if x > 0.0 else 0.0 for x in weights]
+
+
 @jit
 def _accumulate(count, s, sq, aov, pixel, radiance, aovs):
     # Sequential on purpose: the order of additions into each pixel is the sample order.
@@ -70,3 +110,38 @@ def _accumulate(count, s, sq, aov, pixel, radiance, aovs):
             sq[p, c] += r * r
         for c in range(aov.shape[1]):
             aov[p, c] += aovs[i, c]
+
+
+@jit
+def _accumulate_weighted(count, s, sq, aov, pixel, radiance, aovs, weight):
+    for i in range(pixel.shape[0]):
+        p = pixel[i]
+        count[p] += 1.0
+        for c in range(3):
+            r = weight[i] * radiance[i, c]
+            s[p, c] += r
+            sq[p, c] += r * r
+        for c in range(aov.shape[1]):
+            aov[p, c] += aovs[i, c]
+
+
+class SampleSink:
+    """A sink that keeps the samples instead of accumulating them: after a render of a source,
+    `samples()` gives (index (n,) int64, weight (n,) float64, radiance (n,3) float64, aov (n, N_AOV)
+    float64) in the order they were traced. The index is the source's pixel (film pixel for camera
+    sources, the ray's row for ProbeSource)."""
+
+    def __init__(self):
+        self._parts = []
+
+    def add(self, pixel, radiance, aov, weight=None):
+        w = np.ones(pixel.shape[0]) if weight is None else np.array(weight, dtype=np.float64)
+        self._parts.append((np.array(pixel), w, np.array(radiance), np.array(aov)))
+
+    def samples(self):
+        if not self._parts:
+            return np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros((0, N_AOV))
+        return tuple(np.concatenate([p[j] for p in self._parts]) for j in range(4))
+
+    def __repr__(self):
+        return f"SampleSink({sum(p[0].shape[0] for p in self._parts)} samples)"

@@ -17,15 +17,19 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from .bvh import make_accel, ray_offsets
+from .bvh import make_accel
 from .bvh.numba_bvh import _NumbaThreads
+from .context import RenderContext
 from .errors import SettingsError, unknown_name
-from .film import Film
+from .film import Film, combine_films
 from .guiding import make_guide, warm_up_guides
-from .guiding.spatial import empty_state
-from .integrator import Stats, WaveBuffers, trace_wave, warm_up_splitting
+from .integrator import trace_wave
 from .lights import build_lights
 from .provenance import provenance
+from .session import Session, Stop
+from .sources import CameraSource
+from .splitting import warm_up_splitting
+from .wave import Stats, WaveBuffers
 
 DEFAULT_WAVE = 1 << 16
 FILTERS = ("box", "point")
@@ -46,26 +50,6 @@ class RenderResult:
         s = self.stats
         return (f"RenderResult({self.image.shape[1]}x{self.image.shape[0]}, {s['spp']} spp, "
                 f"{s['time_total']:.2f} s, {s['msamples_per_s']:.2f} Msamples/s)")
-
-
-class _Context:
-    """What the wave kernels need, gathered once per render."""
-
-    def __init__(self, scene, accel, lights, seed, max_depth, rr_depth, pixel_filter, crop):
-        self.scene, self.accel, self.lights = scene, accel, lights
-        self.crop = np.asarray(crop, dtype=np.int64)
-        self.jitter = pixel_filter == "box"
-        tri = scene.tri
-        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        self.tri_normal = n / np.linalg.norm(n, axis=1, keepdims=True)  # (F,3) unit, CCW side
-        self.cam = scene.camera.packed()
-        self.seed = int(seed)
-        self.max_depth = int(max_depth)
-        self.rr_depth = int(rr_depth)
-        # Ray offsets per triangle, fitted to the float32 coordinates the ray queries see there
-        self.tri_eps = ray_offsets(tri, accel.centre)
-        self.n_pixels = int(self.crop[2] * self.crop[3])
-        self.guide_state = empty_state()
 
 
 def _check_crop(crop, width, height):
@@ -165,16 +149,15 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     acc = make_accel(accel, scene.tri, threads=n_threads)
     lights = build_lights(scene)
     t_setup = _time.perf_counter() - t_start
-    ctx = _Context(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter, crop)
+    ctx = RenderContext(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter, crop)
     # Trace one throwaway path first: it compiles the kernels (or loads them from the cache), so
     # that neither the time budget nor the stats count Numba's compile.
     t0 = _time.perf_counter()
-    trace_wave(ctx, WaveBuffers(1), Film(crop[2], crop[3]), 0, 0, 1, Stats(), observe=lambda rec: None)
-    split = float(getattr(g, "split", 0.0) or 0.0) if g is not None else 0.0
-    window = float(getattr(g, "window", 0.0) or 0.0) if g is not None else 0.0
+    trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats(), observe=lambda rec: None)
+    splits = g is not None and g.splits
     if g is not None:
         warm_up_guides(ctx)
-    if split > 0.0 or window > 0.0:
+    if splits:
         warm_up_splitting(ctx)
     t_compile = _time.perf_counter() - t0
     t_start = _time.perf_counter() - t_setup  # the budget counts the scene set-up, not the compile
@@ -182,10 +165,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     if g is not None:
         g.prepare(scene, ctx)
         ctx.guide_state = g.state()
-    buf = WaveBuffers(min(wave_size, npix * (spp if time is None else 1024)), split=split > 0.0 or window > 0.0)
+    buf = WaveBuffers(min(wave_size, npix * (spp if time is None else 1024)), split=splits)
     stats = Stats()
-    passes = []
-    films = []  # (film, kind) of every pass group: "pilot", "train", "final"
     bar = None
     if progress:
         from tqdm import tqdm
@@ -193,92 +174,25 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         bar = tqdm(total=spp if time is None else None, unit="spp", desc="render", leave=False,
                    bar_format="{l_bar}{bar}| {n:.0f}/{total_fmt} spp [{elapsed}<{remaining}]"
                    if time is None else "{desc}: {n:.0f} spp [{elapsed}, budget %gs]" % time)
-    learns = g is not None and getattr(g, "learns", True)
-
-    def phase(name):
-        """The bar's description: pilot, train t/T, final (a guide that learns), else render."""
-        if bar is not None and learns:
-            bar.set_description(name)
-
     settings = {"accel": acc.name, "threads": int(n_threads), "seed": int(seed), "max_depth": int(max_depth),
                 "rr_depth": int(rr_depth), "guide": guide, "pixel_filter": pixel_filter, "crop": list(crop),
                 "wave_size": int(wave_size), **provenance()}
-    state = {"sample0": 0}
 
     def snapshot():
-        return _stats(scene, stats, passes, state["sample0"], t_setup, t_render, settings, t_compile, g)
+        return _stats(scene, stats, session.passes, session.sample0, t_setup, t_render, settings, t_compile, g)
 
-    def run_pass(film, pass_spp, kind, learn):
-        """Render pass_spp more spp into `film` (the last of `films`); then the guide learns."""
-        tp = _time.perf_counter()
-        total = pass_spp * npix
-        for g0 in range(0, total, buf.size):
-            if sigint.requested:
-                raise KeyboardInterrupt  # between waves: every finished wave is whole in the film
-            n = min(buf.size, total - g0)
-            trace_wave(ctx, buf, film, state["sample0"], g0, n, stats, observe=g.observe if learn else None,
-                       direct=getattr(g, "learn_direct", True), split=split)
-            if bar is not None:
-                bar.update(n / npix)
-        state["sample0"] += pass_spp
-        entry = {"spp": pass_spp, "time": _time.perf_counter() - tp, "kind": kind, "film": len(films) - 1}
-        if learn:
-            tl = _time.perf_counter()
-            g.update()
-            ctx.guide_state = g.state()
-            entry["time_update"] = _time.perf_counter() - tl
-        passes.append(entry)
-        if callback is not None and callback(len(passes) - 1, film, snapshot()) is False:
-            raise _Stop
-
-    interrupted = False
-    final = Film(crop[2], crop[3])
     sigint = _Sigint()
+    session = Session(ctx, g, buf, stats, spp if time is None else None, time, t_start, bar, callback, snapshot,
+                      lambda: sigint.requested)
+    interrupted = False
     t_render = _time.perf_counter()
     try:
         sigint.install()
-        if learns:
-            # Pilot (1 spp, unguided), then training iterations of 2^t N_c spp while they fit
-            films.append((Film(crop[2], crop[3]), "pilot"))
-            phase("pilot")
-            run_pass(films[-1][0], 1, "pilot", True)
-            for t in range(1, g.iterations + 1):
-                n = g.spp_init * 2 ** t
-                if time is None:
-                    if state["sample0"] + 2 * n > spp:
-                        break  # the final pass gets at least as many samples as this iteration
-                else:
-                    last = passes[-1]
-                    est = (last["time"] / last["spp"]) * n + 2.0 * last.get("time_update", 0.0)
-                    elapsed = _time.perf_counter() - t_start
-                    if elapsed + 2.0 * est > time or elapsed + est > getattr(g, "train_budget", 1.0) * time:
-                        break
-                films.append((Film(crop[2], crop[3]), "train"))
-                phase(f"train {t}/{g.iterations}")
-                run_pass(films[-1][0], n, "train", True)
-        # The final pass(es): the guide frozen; in doubling passes that fit the budget
-        if window > 0.0:
-            ctx.window = _weight_window(g, [f for f, _ in films], crop)
-        films.append((final, "final"))
-        phase("final")
-        pass_spp = passes[-1]["spp"] if passes else 1
-        first_final = len(passes)
-        while True:
-            if time is None:
-                if state["sample0"] >= spp:
-                    break
-                pass_spp = min(pass_spp, spp - state["sample0"])
-            else:
-                elapsed = _time.perf_counter() - t_start
-                if passes:
-                    ref = passes[first_final:] or passes[-1:]
-                    per_spp = sum(p["time"] for p in ref) / sum(p["spp"] for p in ref)
-                    pass_spp = min(pass_spp, int((time - elapsed) / per_spp))
-                    if pass_spp < 1:
-                        break
-            run_pass(final, pass_spp, "final", False)
-            pass_spp *= 2
-    except (KeyboardInterrupt, _Stop) as e:
+        if g is None:
+            session.final_passes()
+        else:
+            g.schedule(session)
+    except (KeyboardInterrupt, Stop) as e:
         interrupted = isinstance(e, KeyboardInterrupt)
     finally:
         sigint.restore()
@@ -289,6 +203,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
             bar.close()
     st = snapshot()
     st["interrupted"] = interrupted
+    films = session.films or [(session.final, "final")]
     image, variance, weights = combine_films([f for f, _ in films], [k for _, k in films])
     for p_entry in st["passes"]:
         p_entry["weight"] = weights[p_entry.pop("film")]
@@ -296,11 +211,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     for f, _ in films:
         aov_film.count += f.count
         aov_film.aov += f.aov
-    return RenderResult(image.astype(np.float32), variance.astype(np.float32), aov_film.aovs(), st, final)
-
-
-class _Stop(Exception):
-    """A callback asked the render to stop."""
+    return RenderResult(image.astype(np.float32), variance.astype(np.float32), aov_film.aovs(), st, session.final)
 
 
 class _Sigint:
@@ -326,66 +237,6 @@ class _Sigint:
         if self._installed:
             signal.signal(signal.SIGINT, signal.default_int_handler)
             self._installed = False
-
-
-def _weight_window(g, films, crop):
-    """ctx.window for the final passes (integrator.trace_wave), or None: the guide's per-voxel
-    outgoing radiance, and per pixel a smoothed estimate of its value from the training passes'
-    image (3x3 box filter of its luminance, at least 1% of the image's mean, so that pixels that
-    happened to get no light yet do not ask for every path to split). It becomes the guide's
-    `window_pixels`, which a FrozenGuide made from it uses when no training passes precede its
-    final pass."""
-    outgoing = g.window_estimates() if hasattr(g, "window_estimates") else None
-    if outgoing is None or not (outgoing > 0.0).any():
-        return None
-    w, h = int(crop[2]), int(crop[3])
-    if films and any(f.count.sum() > 0 for f in films):
-        image, _, _ = combine_films(films, ["train"] * len(films))
-        lum = image[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
-        lum = np.where(np.isfinite(lum), np.maximum(lum, 0.0), 0.0)
-        padded = np.pad(lum, 1, mode="edge")
-        smooth = sum(padded[1 + dy: 1 + dy + h, 1 + dx: 1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)) / 9.0
-        floor = 0.01 * float(lum.mean())
-        if not floor > 0.0:
-            return None
-        g.window_pixels = np.maximum(smooth, floor).ravel()
-    pixels = getattr(g, "window_pixels", None)
-    if pixels is None or pixels.shape[0] != w * h:
-        return None
-    return (np.ascontiguousarray(outgoing, dtype=np.float64), pixels, float(g.window), float(g.window_low))
-
-
-def combine_films(films, kinds=None):
-    """One image from independent renders of the same pixels: weighted by the inverse of each
-    film's mean pixel variance (Mueller 2019), films with fewer than 2 spp in some pixel left out
-    unless nothing else has samples. Returns (image (H,W,3), variance of it, weights)."""
-    kinds = kinds or ["final"] * len(films)
-    usable = [f.count.size and f.count.min() >= 2 for f in films]
-    if not any(usable):  # e.g. a 1-spp render: the films are summed sample by sample
-        total = Film(films[0].width, films[0].height)
-        for f in films:
-            total.count += f.count
-            total.sum += f.sum
-            total.sumsq += f.sumsq
-        return total.mean(), total.variance(), [1.0 if f.count.max() > 0 else 0.0 for f in films]
-    means, vars_, weights = [], [], []
-    for f, ok, kind in zip(films, usable, kinds):
-        if not ok or (kind == "pilot" and sum(usable) > 1):
-            weights.append(0.0)
-            continue
-        v = f.variance()
-        mv = float(v.mean())
-        means.append(f.mean())
-        vars_.append(v)
-        weights.append(1.0 / mv if mv > 0 else math.inf)
-    w = np.array([x for x in weights if x > 0.0])
-    if np.isinf(w).any():  # noiseless films (a black image): by samples instead
-        w = np.array([float(f.count.sum()) for f, x in zip(films, weights) if x > 0.0])
-    w = w / w.sum()
-    image = sum(wi * m for wi, m in zip(w, means))
-    variance = sum(wi * wi * v for wi, v in zip(w, vars_))
-    it = iter(w)
-    return image, variance, [float(next(it)) if x > 0.0 else 0.0 for x in weights]
 
 
 def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile, guide=None):

@@ -17,6 +17,11 @@ The dimension layout is this table, and nothing else in the code hard-codes a di
     BOUNCE + B*k + 7          bounce k: Russian roulette
 
 with BOUNCE = 2 and B = 8; bounce k = 0 is the first surface the camera ray hits.
+
+The sample seam: every random number of a camera path is `draw(ps, key, row, dim)`. It reads the
+counter-based stream, except for the dimensions that a caller supplies in a `PrimarySamples`
+(an external vector per path, e.g. a primary-sample-space warp's output): `pss_dims(m)` lists
+the ones a warp replaces, the pixel position and the direction of the first m bounces.
 A path split into copies at bounce k (tracer.integrator, `split`) keeps its key; copy j >= 1
 takes `split_key(key, k, j)`, a fresh key that draws the same table from bounce k on. The weight
 window's roulette at bounce k (integrator.split_counts) draws `uniform(split_key(key, k, 0), 0)`,
@@ -35,6 +40,8 @@ index)`, which no camera path shares, and their own table:
 
 with P_BOUNCE = 5 and PB = 4.
 """
+from typing import NamedTuple
+
 import numpy as np
 from numba import prange
 
@@ -92,6 +99,46 @@ def uniform(key, dim):
     return float(np.int64(h >> _S11)) * _INV53
 
 
+class PrimarySamples(NamedTuple):
+    """External values for some dimensions of the paths of a wave (the sample seam).
+
+    col: (C,) int64, col[d] = the column of u that dimension d < C comes from, -1 where the
+    stream supplies it; u: (n, D) float64 in [0, 1), row i for the wave's path slot i (slots >= n,
+    e.g. the copies of split paths, read the stream)."""
+
+    col: np.ndarray
+    u: np.ndarray
+
+
+def no_primary_samples():
+    """A PrimarySamples that supplies nothing: every dimension comes from the stream."""
+    return PrimarySamples(np.zeros(0, np.int64), np.zeros((0, 0)))
+
+
+def primary_samples(u, dims):
+    """PrimarySamples with u (n, len(dims)) supplying dimensions `dims` (e.g. pss_dims(m))."""
+    dims = np.asarray(dims, dtype=np.int64)
+    u = np.ascontiguousarray(u, dtype=np.float64)
+    if u.ndim != 2 or u.shape[1] != dims.shape[0]:
+        raise ValueError(f"u must be (n, {dims.shape[0]}) for dims {dims.tolist()}, got {u.shape}")
+    if dims.size and (dims.min() < 0 or np.unique(dims).size != dims.size):
+        raise ValueError(f"dims must be distinct and >= 0, got {dims.tolist()}")
+    col = np.full(int(dims.max()) + 1 if dims.size else 0, -1, np.int64)
+    col[dims] = np.arange(dims.size)
+    return PrimarySamples(col, u)
+
+
+@jit(inline="always")
+def draw(ps, key, row, dim):
+    """Dimension `dim` of the path in wave slot `row` with key `key`: from ps where it supplies
+    that dimension for that row, else uniform(key, dim)."""
+    if dim < ps.col.shape[0] and row < ps.u.shape[0]:
+        c = ps.col[dim]
+        if c >= 0:
+            return ps.u[row, c]
+    return uniform(key, dim)
+
+
 @jit
 def bounce_dim(depth, slot):
     """Dimension of `slot` (DIR, LOBE, ...) at bounce `depth` (0 = first hit)."""
@@ -102,6 +149,18 @@ def bounce_dim(depth, slot):
 def split_key(key, bounce, copy):
     """The key of copy `copy` (>= 1) of a path split at bounce `bounce`."""
     return mix64(key ^ ((np.uint64(bounce) + np.uint64(1)) * _M2 + np.uint64(copy) * _GOLDEN))
+
+
+def pss_dims(m):
+    """(2 + 2m,) int64: the dimensions a primary-sample-space warp of the first m bounces replaces,
+    in order: the pixel position (x, y), then the direction (2 dims) of bounces 0 .. m-1."""
+    m = int(m)
+    if m < 0:
+        raise ValueError(f"m must be >= 0, got {m}")
+    dims = [DIM_PIXEL, DIM_PIXEL + 1]
+    for k in range(m):
+        dims += [BOUNCE + BLOCK * k + DIR, BOUNCE + BLOCK * k + DIR + 1]
+    return np.array(dims, np.int64)
 
 
 @jit

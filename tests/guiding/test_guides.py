@@ -15,7 +15,10 @@ from tests import scenes
 from tests.stats import assert_clean, assert_z, image_mean
 from tracer.errors import SettingsError
 from tracer.guiding import FrozenGuide, guide_names, make_guide
-from tracer.integrator import Stats, WaveBuffers, trace_wave
+from tracer.integrator import trace_wave
+from tracer.sources import CameraSource
+from tracer.splitting import WeightWindow, throughput_plan
+from tracer.wave import Stats, WaveBuffers
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 GUIDES = [g for g in guide_names() if g != "bsdf"]
@@ -131,17 +134,17 @@ def test_records_carry_the_incident_radiance(tmp_path):
     # that (its own NEE excluded: with it the mean would be larger).
     a, le = 0.5, 1.0
     scene = tracer.load_scene(scenes.closed_box(tmp_path, a, le, width=16, height=16))
-    from tracer.render import _Context
+    from tracer.context import RenderContext
     from tracer.bvh import make_accel
     from tracer.film import Film
     from tracer.lights import build_lights
 
-    ctx = _Context(scene, make_accel("embree", scene.tri), build_lights(scene), 5, -1, 3, "box", (0, 0, 16, 16))
+    ctx = RenderContext(scene, make_accel("embree", scene.tri), build_lights(scene), 5, -1, 3, "box", (0, 0, 16, 16))
     n = 16 * 16 * 64
     # direct=True: the full incident radiance; direct=False: less the emission hit directly
     for direct, expected in ((True, le / (1 - a)), (False, le * a / (1 - a))):
         got = []
-        trace_wave(ctx, WaveBuffers(n), Film(16, 16), 0, 0, n, Stats(), observe=lambda rec: got.append(rec),
+        trace_wave(ctx, WaveBuffers(n), CameraSource(), Film(16, 16), 0, 0, n, Stats(), observe=lambda rec: got.append(rec),
                    direct=direct)
         rec = got[0]
         first = rec.radiance[:n][rec.strategy[:n] >= 0].astype(np.float64)
@@ -258,12 +261,12 @@ def test_records_link_each_vertex_to_the_one_before(tmp_path):
     from tracer.bvh import make_accel
     from tracer.film import Film
     from tracer.lights import build_lights
-    from tracer.render import _Context
+    from tracer.context import RenderContext
 
-    ctx = _Context(scene, make_accel("embree", scene.tri), build_lights(scene), 5, -1, 3, "box", (0, 0, 16, 16))
+    ctx = RenderContext(scene, make_accel("embree", scene.tri), build_lights(scene), 5, -1, 3, "box", (0, 0, 16, 16))
     n = 16 * 16 * 8
     got = []
-    trace_wave(ctx, WaveBuffers(n), Film(16, 16), 0, 0, n, Stats(), observe=lambda rec: got.append(rec))
+    trace_wave(ctx, WaveBuffers(n), CameraSource(), Film(16, 16), 0, 0, n, Stats(), observe=lambda rec: got.append(rec))
     rec = got[0]
     r = np.flatnonzero(rec.strategy >= 0)
     p = rec.prev[r]
@@ -326,11 +329,12 @@ def test_splitting_keeps_one_sample_per_path_and_is_off_while_recording():
     g = make_guide("photon", iterations=3)
     tracer.render(scene, spp=16, guide=g, seed=5)
     frozen = FrozenGuide(g)
-    frozen.split, frozen.window = 0.0, 0.0
+    frozen.splitting = WeightWindow(0.0, 0.0, 0.0)
     off = tracer.render(scene, spp=8, guide=frozen, seed=6)
-    frozen.split = 1.0
+    frozen.splitting = WeightWindow(1.0, 0.0, 0.0)
     on = tracer.render(scene, spp=8, guide=frozen, seed=6)
-    frozen.split, frozen.window, frozen.window_low = 0.0, 1.0, 0.5
+    frozen.splitting = WeightWindow(0.0, 1.0, 0.5)
+    frozen.splitting.pixel_est = g.splitting.pixel_est
     win = tracer.render(scene, spp=8, guide=frozen, seed=6)
     assert off.stats["split_copies"] == 0 and on.stats["split_copies"] > 0
     assert off.stats["window_ended"] == 0 and on.stats["window_ended"] == 0
@@ -344,7 +348,8 @@ def test_splitting_keeps_one_sample_per_path_and_is_off_while_recording():
     n = w * h * 8
     for observe, copies in ((None, True), (lambda rec: None, False)):
         st = Stats()
-        trace_wave(ctx, WaveBuffers(n, split=True), Film(w, h), 0, 0, n, st, observe=observe, split=1.0)
+        trace_wave(ctx, WaveBuffers(n, split=True), CameraSource(), Film(w, h), 0, 0, n, st, observe=observe,
+                   split=throughput_plan(1.0))
         assert (st.split_copies > 0) == copies
 
 
@@ -364,8 +369,9 @@ def test_window_settings_are_checked(bad):
 def test_outgoing_radiance_per_voxel_is_the_mean_of_what_arrivals_collected():
     """A record's vertex sent back what its path's previous record received: per leaf, outgoing()
     is the mean of those, over leaves with enough of them; halves go to both children on a split."""
-    from tracer.guiding.spatial import OUT_MIN_SAMPLES, HierarchicalGrid
-    from tracer.integrator import Records
+    from tracer.guiding.records import Records
+    from tracer.guiding.spatial import HierarchicalGrid
+    from tracer.splitting import OUT_MIN_SAMPLES, observe_outgoing, outgoing
 
     g = HierarchicalGrid(np.zeros(3), np.ones(3), 1, 4, 8, 1)
     g.visit(np.arange(g.n_cells), 0)
@@ -378,13 +384,13 @@ def test_outgoing_radiance_per_voxel_is_the_mean_of_what_arrivals_collected():
     rec.node[n:] = 0
     rec.prev[n:] = np.arange(n)
     rec.strategy[n + 1] = -1  # not a vertex
-    g.observe_outgoing(rec)
+    observe_outgoing(g, rec)
     keep = np.ones(n, bool)
     keep[1] = False
-    assert np.isclose(g.outgoing()[0], rec.radiance[:n][keep].mean(), rtol=1e-6)
+    assert np.isclose(outgoing(g)[0], rec.radiance[:n][keep].mean(), rtol=1e-6)
     g2 = HierarchicalGrid(np.zeros(3), np.ones(3), 1, 4, 8, 1)
     g2.visit(np.arange(g2.n_cells), 0)
     few = rec.head(n + OUT_MIN_SAMPLES - 1)
     few.prev[n:] = np.arange(OUT_MIN_SAMPLES - 1)
-    g2.observe_outgoing(few)
-    assert g2.outgoing()[0] == 0.0  # too few arrivals: unknown
+    observe_outgoing(g2, few)
+    assert outgoing(g2)[0] == 0.0  # too few arrivals: unknown

@@ -155,7 +155,7 @@ def test_grid_records_estimate_radiance_times_cosine_per_bin():
     over the bin. Uniform directions on the sphere (pdf 1 / 4 pi) under L = 1 with the normal +z:
     every bin's mean is z-tested against the integral of |z| over the bin, 2 pi / n_phi |z1^2 -
     z0^2| / 2 for a row [z0, z1]; the sum over bins against 2 pi."""
-    from tracer.integrator import Records
+    from tracer.guiding.records import Records
 
     rng = np.random.default_rng(11)
     n = 200_000

@@ -3,11 +3,15 @@
 `bsdf` is plain BSDF importance sampling (no guide). `grid` and `photon` are histogram guides on
 a hierarchical grid (tracer/guiding/histogram.py), learned from camera paths and from photons.
 Each guide is built from a settings dict; unknown names or settings are errors that list the
-valid ones. A guide implements the contract of DESIGN.md: `prepare(scene, ctx)`, `state()` (the
-arrays the integrator's kernels read, a `spatial.GuideState`), `observe(records)` (the vertices
-of a wave of camera paths), `update()` (between passes), plus `memory_bytes()` and `stats()`.
+valid ones. A guide is a `base.Guide`: `prepare(scene, ctx)`, `state()` (the arrays the
+integrator's kernels read, a `spatial.GuideState`), `observe(records)` (the vertices of a wave of
+camera paths), `update()` (between passes), `schedule(session)` (its passes), plus
+`memory_bytes()` and `stats()`; docs/architecture.md shows where each is called.
 """
+import copy
+
 from ..errors import SettingsError, unknown_name
+from .base import Guide
 from .histogram import GridGuide, PhotonGuide
 
 # name -> (factory or None for plain BSDF sampling, {setting: default})
@@ -56,7 +60,7 @@ def warm_up_guides(ctx):
     grid.visit(grid.locate(np.full((1, 3), 0.5), np.array([[0.0, 0.0, 1.0]])), 0)
     grid.accumulate(np.zeros(1, np.int64), bin_of_batch(np.array([[0.0, 0.0, 1.0]]), 2, 2), np.ones(1))
     build_tables(grid.power[:1].reshape(1, 2, 2))
-    from ..integrator import Records
+    from .records import Records
 
     rec = Records.allocate(1)
     grid.visit_records(rec, 0)
@@ -76,7 +80,7 @@ def warm_up_guides(ctx):
                  np.zeros((1, 1)), np.zeros(1))
 
 
-class FrozenGuide:
+class FrozenGuide(Guide):
     """What a trained guide learned, fixed: a render samples from its maps and learns nothing (no
     pilot, no training passes). For equal-spp comparisons of the maps themselves, e.g.
     `g = make_guide("photon"); tracer.render(scene, spp=64, guide=g)` to train, then
@@ -91,26 +95,14 @@ class FrozenGuide:
             raise SettingsError("FrozenGuide needs a guide that has learned (render with it first)")
         self.guide = guide
         self.name = guide.name + " (frozen)"
-        self.split = getattr(guide, "split", 0.0)
-        self.window = getattr(guide, "window", 0.0)
-        self.window_low = getattr(guide, "window_low", 0.0)
-        self.window_pixels = getattr(guide, "window_pixels", None)
-        self._outgoing = guide.window_estimates() if hasattr(guide, "window_estimates") else None
+        self.splitting = copy.copy(guide.splitting)  # with the pixel estimate of its training passes
+        self._outgoing = guide.window_estimates()
         self._state = guide.state()
         self.peak_memory = guide.memory_bytes()
         self.time_learning = self.time_update = self.time_inference = 0.0
 
-    def prepare(self, scene, ctx):
-        pass
-
     def state(self):
         return self._state
-
-    def observe(self, records):
-        pass
-
-    def update(self):
-        pass
 
     def window_estimates(self):
         return self._outgoing

@@ -26,8 +26,8 @@ Both follow Algorithm 1 of Zhu et al. 2021 (Photon-Driven Neural Reconstruction 
 
 Splitting and the weight window (`split`, `window`, `window_low`; on for `photon` by default): the
 final passes split overweight paths and roulette those expected to bring little
-(integrator.trace_wave). For the window, each voxel learns from the training records the mean
-radiance that camera paths arriving in it went on to collect (HierarchicalGrid.outgoing); the
+(tracer.splitting). For the window, each voxel learns from the training records the mean
+radiance that camera paths arriving in it went on to collect (splitting.outgoing); the
 render adds each pixel's value from the training passes' image.
 
 Direct light: next-event estimation already samples the light that a vertex receives straight
@@ -44,7 +44,7 @@ side, both of which lie behind the wall and send guided samples where the BSDF i
 the surface with one class, 1% with six; relMSE fell from 0.236 to 0.122 (bsdf: 0.38); on
 `cornell` from 1.45e-3 to 1.19e-3 (bsdf: 2.75e-3). `normal_classes` 1 is the paper's one map per voxel.
 
-The render loop (tracer/render.py) runs the schedule; this module only learns. Mixing weights
+The schedule is Algorithm 1 (tracer/guiding/schedule.py); this module learns. Mixing weights
 (the probability a of BSDF sampling, per voxel) start at 0.5 and stay in [alpha_min, alpha_max]:
 - `mixing` eq14 (the paper's): once a voxel has `mis_min_samples` vertices of both strategies,
   a = mean L_bsdf / (mean L_bsdf + mean L_guide), L = radiance x |f cos| of each vertex's direction.
@@ -64,9 +64,12 @@ from numba import prange
 
 from .._jit import jit, kernel
 from ..errors import SettingsError
+from ..splitting import WeightWindow, observe_outgoing, outgoing
+from .base import Guide
 from .directional import bin_of_batch, build_tables
 from .photons import trace_photons
 from .reconstruct import RECONSTRUCTORS, make_reconstructor
+from .schedule import algorithm1
 from .spatial import HierarchicalGrid, empty_state
 
 COMMON = {
@@ -85,7 +88,7 @@ COMMON = {
     "mixing": "variance",  # variance: least second moment; eq14: the paper's mean-contribution ratio
     "train_budget": 0.25,  # with a time budget: pilot and training iterations end within this share of it
     "normal_classes": 6,  # 6: a voxel keeps one map per side of its surfaces (see below); 1: one map
-    "split": 0.0,  # > 0: final passes split paths whose throughput exceeds this (integrator.trace_wave); 0: off
+    "split": 0.0,  # > 0: final passes split paths whose throughput exceeds this (tracer.splitting); 0: off
     "window": 0.0,  # > 0: final passes' weight window splits paths expected to bring more than this x their pixel
     "window_low": 0.2,  # ... and rouletted those expected to bring less than this x their pixel
 }
@@ -162,9 +165,9 @@ def _float(name, v, lo, hi=math.inf):
     return float(v)
 
 
-class HistogramGuide:
-    """Shared machinery of `grid` and `photon`: the contract of DESIGN.md (prepare, state, observe,
-    update) over a HierarchicalGrid of per-voxel directional histograms."""
+class HistogramGuide(Guide):
+    """Shared machinery of `grid` and `photon`: the Guide contract (prepare, state, observe, update,
+    schedule) over a HierarchicalGrid of per-voxel directional histograms."""
 
     name = "histogram"
     learns = True
@@ -183,15 +186,8 @@ class HistogramGuide:
         self.q_thr = _float("mis_min_samples", s["mis_min_samples"], 1.0)
         self.max_levels = _int("max_levels", s["max_levels"], 0)
         self.train_budget = _float("train_budget", s["train_budget"], 0.0, 1.0)
-        self.split = _float("split", s["split"], 0.0)
-        if 0.0 < self.split < 1.0:
-            raise SettingsError(f"guide setting split must be 0 (off) or at least 1, got {s['split']!r}")
-        self.window = _float("window", s["window"], 0.0)
-        self.window_low = _float("window_low", s["window_low"], 0.0)
-        if self.window > 0.0 and not self.window_low < self.window:
-            raise SettingsError(f"guide setting window_low ({s['window_low']!r}) must be below window "
-                                f"({s['window']!r})")
-        self.window_pixels = None  # set by the render (render._weight_window)
+        self.splitting = WeightWindow(_float("split", s["split"], 0.0), _float("window", s["window"], 0.0),
+                                      _float("window_low", s["window_low"], 0.0))
         self.learn_direct = bool(_int("direct", s["direct"], 0))
         if s["direct"] not in (0, 1):
             raise SettingsError(f"guide setting direct must be 0 or 1, got {s['direct']!r}")
@@ -239,8 +235,8 @@ class HistogramGuide:
             g = self.grid
             self.info["vertices"] += g.visit_records(rec, self.iteration)
             _mis_stats(rec.node, rec.strategy, rec.radiance, rec.fcos, g.mis_sum, g.mis_n)
-            if self.window > 0.0:
-                g.observe_outgoing(rec)
+            if self.splitting.window > 0.0:
+                observe_outgoing(g, rec)
             if self.mixing == "variance":
                 if self._mom is None or self._mom.shape[0] < g.alpha.shape[0]:
                     self._mom = np.zeros((g.alpha.shape[0], N_ALPHA))
@@ -284,9 +280,13 @@ class HistogramGuide:
         return g.state()
 
     def window_estimates(self):
-        """Per tree node, the outgoing radiance of the weight window (HierarchicalGrid.outgoing);
-        None before there is a grid."""
-        return self.grid.outgoing() if self.grid is not None else None
+        """Per tree node, the outgoing radiance of the weight window (splitting.outgoing); None
+        before there is a grid."""
+        return outgoing(self.grid) if self.grid is not None else None
+
+    def schedule(self, session):
+        """Algorithm 1: pilot, training iterations, final passes (tracer.guiding.schedule)."""
+        algorithm1(session, self)
 
     def memory_bytes(self):
         return self.grid.memory_bytes() if self.grid is not None else 0

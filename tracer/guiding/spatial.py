@@ -40,6 +40,8 @@ class GuideState(NamedTuple):
     n_theta: int
     n_phi: int
     n_class: int  # trees per cell: 1, or 6 (one per facing-normal class, see normal_class)
+    pixel_slot: np.ndarray  # (P,) int32 per film pixel, the map its first bounce samples (-1: the voxel's); (0,): none
+    pixel_alpha: np.ndarray  # (P,) float64 per film pixel, the mixing weight that goes with it
 
 
 def empty_state(n_theta=2, n_phi=2):
@@ -47,7 +49,12 @@ def empty_state(n_theta=2, n_phi=2):
     return GuideState(np.zeros(3), np.ones(3), np.zeros(3, np.int64), np.full(1, -1, np.int32),
                       np.zeros(1, np.int32), np.zeros(1), np.full(1, -1, np.int32), np.ones(1),
                       np.zeros((1, n_theta + 1), np.uint32), np.zeros((1, n_theta * n_phi), np.uint16),
-                      np.ones(1), np.zeros(1), int(n_theta), int(n_phi), 1)
+                      np.ones(1), np.zeros(1), int(n_theta), int(n_phi), 1, *no_pixel_maps())
+
+
+def no_pixel_maps():
+    """(pixel_slot, pixel_alpha) of a state without per-pixel first-bounce maps."""
+    return np.zeros(0, np.int32), np.zeros(0)
 
 
 @jit(inline="always")
@@ -64,20 +71,6 @@ def normal_class(n_class, n):
     if abs(n[2]) > m:
         ax = 2
     return 2 * ax + (1 if n[ax] < 0.0 else 0)
-
-
-OUT_MIN_SAMPLES = 8  # camera vertices a leaf needs before outgoing() trusts its mean
-
-
-@jit
-def _outgoing_stats(node, strategy, prev, radiance, out_sum, out_n):
-    for r in range(node.shape[0]):
-        nd = node[r]
-        p = prev[r]
-        if nd < 0 or strategy[r] < 0 or p < 0:
-            continue
-        out_sum[nd] += radiance[p]
-        out_n[nd] += 1.0
 
 
 @jit(inline="always")
@@ -98,34 +91,55 @@ def find_voxel(gs, x, n):
     return node
 
 
+# --- Locate, then sample: what the integrator asks of a guide at a vertex ---------------------------
 @jit(inline="always")
-def voxel_sample(gs, node, u0, u1):
-    """(direction, pdf) from the map of leaf `node` (which must have one)."""
-    return map_sample(gs.rowcum, gs.dens, gs.wsum, gs.pscale, gs.slot[node], gs.n_theta, gs.n_phi, u0, u1)
+def locate(gs, x, n, pixel, depth):
+    """Where the guide keeps the map for a vertex at x (world) with facing normal n, on a path of
+    film pixel `pixel` at bounce `depth` (0: the first hit): (node, slot, a). node is the voxel
+    (leaf, -1 outside the grid), slot the sampling map to draw from (-1: none, sample the BSDF),
+    a the probability of BSDF sampling in the one-sample MIS mixture (1 where slot is -1). A
+    per-pixel map (gs.pixel_slot, e.g. a first-bounce map per pixel) takes precedence at depth 0."""
+    node = find_voxel(gs, x, n)
+    if depth == 0 and 0 <= pixel < gs.pixel_slot.shape[0]:
+        s = gs.pixel_slot[pixel]
+        if s >= 0:
+            return node, s, gs.pixel_alpha[pixel]
+    if node >= 0:
+        s = gs.slot[node]
+        if s >= 0:
+            return node, s, gs.alpha[node]
+    return node, -1, 1.0
 
 
 @jit(inline="always")
-def voxel_pdf(gs, node, d):
-    return map_pdf(gs.dens, gs.pscale, gs.slot[node], gs.n_theta, gs.n_phi, d)
+def slot_sample(gs, slot, u0, u1):
+    """(world direction, solid-angle pdf) from sampling map `slot` (>= 0) for u0, u1 in [0, 1)."""
+    return map_sample(gs.rowcum, gs.dens, gs.wsum, gs.pscale, slot, gs.n_theta, gs.n_phi, u0, u1)
+
+
+@jit(inline="always")
+def slot_pdf(gs, slot, d):
+    """Solid-angle density of world direction d under sampling map `slot` (>= 0)."""
+    return map_pdf(gs.dens, gs.pscale, slot, gs.n_theta, gs.n_phi, d)
 
 
 # --- The sampler contract of DESIGN.md: sample(state, x, n, wo, u), pdf(state, x, n, wi) -------
 @jit(inline="always")
 def guide_sample(gs, x, n, wo, u0, u1):
-    """Sample a world direction from the guide at x, n (the normal on the side of wo): (wi, pdf);
-    pdf 0 where there is no map."""
-    node = find_voxel(gs, x, n)
-    if node < 0 or gs.slot[node] < 0:
+    """Sample a world direction from the guide at x, n (the normal on the side of wo), beyond the
+    first bounce: (wi, pdf); pdf 0 where there is no map."""
+    _, slot, _ = locate(gs, x, n, -1, 1)
+    if slot < 0:
         return (0.0, 0.0, 1.0), 0.0
-    return voxel_sample(gs, node, u0, u1)
+    return slot_sample(gs, slot, u0, u1)
 
 
 @jit(inline="always")
 def guide_pdf(gs, x, n, wi):
-    node = find_voxel(gs, x, n)
-    if node < 0 or gs.slot[node] < 0:
+    _, slot, _ = locate(gs, x, n, -1, 1)
+    if slot < 0:
         return 0.0
-    return voxel_pdf(gs, node, wi)
+    return slot_pdf(gs, slot, wi)
 
 
 @kernel
@@ -383,20 +397,7 @@ class HierarchicalGrid:
         tables = [getattr(self, p + name)[:m] for name in ("rowcum", "dens", "wsum", "pscale")]
         return GuideState(self.lo.copy(), np.full(3, 1.0 / self.side), self.res.astype(np.int64),
                           self.child[:n], self.axis[:n], self.split[:n], slot, self.alpha[:n],
-                          *tables, self.n_theta, self.n_phi, self.n_class)
-
-    def outgoing(self, min_samples=OUT_MIN_SAMPLES):
-        """(n_nodes,) float64: per leaf, the mean luminance of the radiance that camera paths arriving
-        there went on to collect (observe_outgoing), where at least `min_samples` arrived; else 0
-        (unknown). The adjoint estimate of the weight window (integrator.window_counts)."""
-        n = self.n_nodes
-        c = self.out_n[:n]
-        return np.where(c >= min_samples, self.out_sum[:n] / np.maximum(c, 1.0), 0.0)
-
-    def observe_outgoing(self, rec):
-        """Add a wave's records (a Records view) to the leaves' outgoing radiance: a record's vertex
-        sent back the radiance that its path's previous record received along its direction."""
-        _outgoing_stats(rec.node, rec.strategy, rec.prev, rec.radiance, self.out_sum, self.out_n)
+                          *tables, self.n_theta, self.n_phi, self.n_class, *no_pixel_maps())
 
     def lookup_state(self):
         """A state for locating points only (no maps)."""

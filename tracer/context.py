@@ -1,0 +1,65 @@
+"""The render context: what a render's kernels, sources and guides read, gathered once.
+
+A RenderContext is made by tracer.render() for one render and handed to the method
+(`guide.prepare(scene, ctx)`), to every source (`source.start(ctx, ...)`) and to
+integrator.trace_wave. Guides may read it; only the render writes `guide_state`.
+"""
+from typing import NamedTuple
+
+import numpy as np
+
+from .bvh import ray_offsets
+from .guiding.spatial import empty_state
+
+
+class Surfaces(NamedTuple):
+    """The scene's triangles as the shading kernels read them."""
+
+    tri: np.ndarray  # (F, 3, 3) float64 world vertices
+    normal: np.ndarray  # (F, 3) float64 unit geometric normal, counter-clockwise side
+    material: np.ndarray  # (F,) material index of each triangle
+    eps: np.ndarray  # (F,) float64 ray offset of each triangle (tracer.bvh.ray_offsets)
+    mat_type: np.ndarray  # (M,) int32 material type (tracer.bsdfs)
+    mat_param: np.ndarray  # (M, 8) float64 material parameters
+
+
+class RenderContext:
+    """One render's fixed inputs.
+
+    scene        the Scene (tracer.load_scene)
+    accel        the ray-query accel (tracer.bvh.make_accel): intersect(o, d), occluded(o, d, tmax)
+    lights       the light tables (tracer.lights.build_lights), a Numba-readable NamedTuple
+    surfaces     Surfaces of the scene (with tri_normal and tri_eps below)
+    tri_normal   (F, 3) float64 unit geometric normals; tri_eps (F,) float64 ray offsets, fitted to
+                 the float32 coordinates the ray queries see there
+    cam          the camera, packed for camera_ray
+    seed         the render's seed (keys of camera paths and photons derive from it)
+    max_depth, rr_depth   path depth limits (Mitsuba conventions, see tracer.integrator)
+    crop         (4,) int64 (x0, y0, w, h): the window of the image the film covers
+    jitter       True for the box pixel filter, False for the point filter
+    n_pixels     film pixels, w * h
+    guide_state  the GuideState the kernels sample from (an empty one: BSDF sampling); set by the
+                 render from guide.state() after each update
+    """
+
+    def __init__(self, scene, accel, lights, seed, max_depth, rr_depth, pixel_filter, crop):
+        self.scene, self.accel, self.lights = scene, accel, lights
+        self.crop = np.asarray(crop, dtype=np.int64)
+        self.jitter = pixel_filter == "box"
+        tri = scene.tri
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        self.tri_normal = n / np.linalg.norm(n, axis=1, keepdims=True)
+        self.cam = scene.camera.packed()
+        self.seed = int(seed)
+        self.max_depth = int(max_depth)
+        self.rr_depth = int(rr_depth)
+        self.tri_eps = ray_offsets(tri, accel.centre)
+        self.surfaces = Surfaces(tri, self.tri_normal, scene.tri_material, self.tri_eps, scene.materials.type,
+                                 scene.materials.param)
+        self.n_pixels = int(self.crop[2] * self.crop[3])
+        self.guide_state = empty_state()
+
+    def __repr__(self):
+        x0, y0, w, h = (int(v) for v in self.crop)
+        return (f"RenderContext({self.scene.path}, {w}x{h} at {x0},{y0}, seed {self.seed}, "
+                f"max_depth {self.max_depth}, accel {self.accel.name})")

@@ -1,0 +1,78 @@
+"""The contract between the render and a directional guide: the `Guide` base class.
+
+A guide is a Python object that render() drives, and a GuideState its Numba kernels read. What
+render() and the integrator ask of it:
+
+    prepare(scene, ctx)    start of a render (ctx: tracer.context.RenderContext)
+    state()                the GuideState the kernels sample from (tracer.guiding.spatial): they
+                           locate a vertex's map (`spatial.locate(state, x, n, pixel, depth)`, a
+                           voxel's map, or a per-pixel map at the first bounce), then draw from it
+                           and evaluate it (`slot_sample`, `slot_pdf`)
+    observe(records)       the vertices of a wave of camera paths (guiding.records), in passes run
+                           with learn=True
+    update()               between passes: learn from what was observed, rebuild the maps
+    schedule(session)      the passes of the render (tracer.session.Session): by default the final
+                           passes alone; guides that learn run their own (e.g. Algorithm 1)
+    split_plan(films, crop)   the splitting.SplitPlan of the final passes, or None
+    memory_bytes(), stats()   for the render's statistics
+
+and the attributes below. A guide need not learn: one that returns a fixed state renders with it
+from the first sample (e.g. FrozenGuide, or a per-pixel map computed once).
+"""
+from .spatial import empty_state
+
+
+class Guide:
+    """Base class of directional guides; the defaults describe a guide that learns nothing."""
+
+    name = "guide"
+    learns = False  # passes record vertices for observe() (the pilot and training passes)
+    learn_direct = True  # records count the emission their direction hits directly (else NEE's part is left out)
+    iterations = 0  # training iterations of Algorithm 1 (schedules that use it)
+    spp_init = 1  # Algorithm 1's N_c: iteration t renders 2^t N_c spp
+    train_budget = 1.0  # with a time budget: share of it that learning may take
+    splitting = None  # splitting.WeightWindow, or None (never splits)
+    time_learning = 0.0  # seconds spent observing and learning
+    time_update = 0.0  # seconds spent rebuilding maps between passes
+    time_inference = 0.0  # seconds of network inference
+    peak_memory = 0  # bytes
+
+    @property
+    def splits(self):
+        """Whether final passes may split paths (the wave buffers then need room for copies)."""
+        return self.splitting is not None and self.splitting.active
+
+    def prepare(self, scene, ctx):
+        pass
+
+    def state(self):
+        return empty_state()
+
+    def observe(self, records):
+        pass
+
+    def update(self):
+        pass
+
+    def schedule(self, session):
+        """Run the render's passes: the final passes, with this guide's split plan."""
+        session.final_passes(self.split_plan(session.training_films(), session.ctx.crop))
+
+    def split_plan(self, films, crop):
+        """The SplitPlan of the final passes from the training passes' films, or None."""
+        if not self.splits:
+            return None
+        return self.splitting.plan(self.window_estimates(), films, crop)
+
+    def window_estimates(self):
+        """Per guide node, the weight window's outgoing radiance estimate, or None."""
+        return None
+
+    def memory_bytes(self):
+        return 0
+
+    def stats(self):
+        return {}
+
+    def __repr__(self):
+        return f"{type(self).__name__}({self.name!r})"

@@ -1,0 +1,30 @@
+"""Algorithm 1 of Zhu et al. 2021, the schedule of the histogram guides (`grid`, `photon`).
+
+A 1-spp pilot (unguided, its vertices start the grid), training iterations t = 1, 2, ... of
+2^t N_c spp, each followed by the guide's update, while they fit (with spp: while the final pass
+gets at least as many samples as the iteration; with a time budget: while twice the estimated
+cost fits in the budget and the iteration ends within `train_budget` of it), then the final
+guided passes with what the budget has left. The image combines the training iterations and the
+final passes weighted by the inverse of each one's mean pixel variance (the pilot is not used).
+"""
+
+
+def algorithm1(session, guide):
+    """Run Algorithm 1 for `guide` (a Guide with iterations, spp_init, train_budget) in `session`."""
+    session.phase("pilot")
+    session.run_pass(session.new_film("pilot"), 1, "pilot", learn=True)
+    for t in range(1, guide.iterations + 1):
+        n = guide.spp_init * 2 ** t
+        if session.time is None:
+            if session.sample0 + 2 * n > session.spp:
+                break  # the final pass gets at least as many samples as this iteration
+        else:
+            last = session.passes[-1]
+            est = (last["time"] / last["spp"]) * n + 2.0 * last.get("time_update", 0.0)
+            elapsed = session.elapsed()
+            if elapsed + 2.0 * est > session.time or elapsed + est > guide.train_budget * session.time:
+                break
+        film = session.new_film("train")
+        session.phase(f"train {t}/{guide.iterations}")
+        session.run_pass(film, n, "train", learn=True)
+    session.final_passes(guide.split_plan(session.training_films(), session.ctx.crop))

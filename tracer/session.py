@@ -1,0 +1,114 @@
+"""A render's passes: what a method's schedule calls to render, learn and spend the budget.
+
+render() makes a Session and hands it to the method: `guide.schedule(session)` (plain BSDF
+sampling and guides that learn nothing run `session.final_passes()`). A schedule renders passes
+with `run_pass` into films it opens with `new_film`, learns between them (run_pass with
+learn=True calls the guide's observe and update), and ends with `final_passes`, which fills the
+rest of the budget (spp or time) in doubling passes. The image combines the films by
+inverse variance (film.combine_films; pilot films are left out).
+"""
+import time as _time
+
+from .film import Film
+from .integrator import trace_wave
+from .sources import CameraSource
+
+
+class Stop(Exception):
+    """A callback asked the render to stop."""
+
+
+class Session:
+    """The passes of one render.
+
+    ctx: the RenderContext; guide: the method (None: BSDF sampling); buf: the WaveBuffers;
+    stats: the wave.Stats; spp: the target samples per pixel (time None) or None; time: the budget
+    in seconds or None; t_start: perf_counter() the budget counts from; bar: a tqdm bar or None;
+    callback(pass_index, film, stats) after each pass (False stops); snapshot(): the stats dict;
+    interrupted(): whether Ctrl-C asked to stop (checked between waves).
+    """
+
+    def __init__(self, ctx, guide, buf, stats, spp, time, t_start, bar, callback, snapshot, interrupted):
+        self.ctx, self.guide, self.buf, self.stats = ctx, guide, buf, stats
+        self.spp, self.time, self.t_start = spp, time, t_start
+        self.bar, self.callback, self.snapshot, self.interrupted = bar, callback, snapshot, interrupted
+        self.films = []  # (film, kind) of every pass group: "pilot", "train", "final"
+        self.passes = []  # one entry per pass: spp, time, kind, film index, time_update
+        self.sample0 = 0  # sample index the next pass starts at
+        w, h = int(ctx.crop[2]), int(ctx.crop[3])
+        self.final = Film(w, h)  # the final passes' film
+        self.camera = CameraSource()
+
+    def elapsed(self):
+        """Seconds of the budget spent so far."""
+        return _time.perf_counter() - self.t_start
+
+    def new_film(self, kind):
+        """Open a film for a group of passes of `kind` ("pilot" films get no weight in the image)."""
+        film = Film(int(self.ctx.crop[2]), int(self.ctx.crop[3]))
+        self.films.append((film, kind))
+        return film
+
+    def training_films(self):
+        """The films rendered so far (what a guide's split plan estimates pixels from)."""
+        return [f for f, _ in self.films]
+
+    def phase(self, name):
+        """Show `name` (pilot, train t/T, final) on the progress bar of a guide that learns."""
+        if self.bar is not None and self.guide is not None and self.guide.learns:
+            self.bar.set_description(name)
+
+    def run_pass(self, film, spp, kind, learn=False, source=None, split=None):
+        """Render `spp` more samples per pixel from `source` (default: the camera) into `film`, in
+        waves; with `learn`, the guide observes the vertices and updates after the pass. split: a
+        splitting.SplitPlan for the waves (final passes), or None. Raises KeyboardInterrupt between
+        waves after Ctrl-C, Stop when the callback returns False."""
+        ctx, buf, g = self.ctx, self.buf, self.guide
+        source = self.camera if source is None else source
+        tp = _time.perf_counter()
+        total = source.count(ctx, spp)
+        observe = g.observe if learn else None
+        direct = g.learn_direct if g is not None else True
+        for g0 in range(0, total, buf.size):
+            if self.interrupted():
+                raise KeyboardInterrupt  # between waves: every finished wave is whole in the film
+            n = min(buf.size, total - g0)
+            trace_wave(ctx, buf, source, film, self.sample0, g0, n, self.stats, observe=observe, direct=direct,
+                       split=split)
+            if self.bar is not None:
+                self.bar.update(n / ctx.n_pixels)
+        self.sample0 += spp
+        entry = {"spp": spp, "time": _time.perf_counter() - tp, "kind": kind, "film": len(self.films) - 1}
+        if learn:
+            tl = _time.perf_counter()
+            g.update()
+            ctx.guide_state = g.state()
+            entry["time_update"] = _time.perf_counter() - tl
+        self.passes.append(entry)
+        if self.callback is not None and self.callback(len(self.passes) - 1, film, self.snapshot()) is False:
+            raise Stop
+
+    def final_passes(self, split=None):
+        """Fill the rest of the budget with final passes into self.final: each twice the last pass's
+        spp (the first as many as the last pass, or 1), up to `spp` in all, or, with a time budget,
+        while the next one fits in the time left at the final passes' speed so far."""
+        self.films.append((self.final, "final"))
+        self.phase("final")
+        passes = self.passes
+        pass_spp = passes[-1]["spp"] if passes else 1
+        first_final = len(passes)
+        while True:
+            if self.time is None:
+                if self.sample0 >= self.spp:
+                    break
+                pass_spp = min(pass_spp, self.spp - self.sample0)
+            else:
+                elapsed = self.elapsed()
+                if passes:
+                    ref = passes[first_final:] or passes[-1:]
+                    per_spp = sum(p["time"] for p in ref) / sum(p["spp"] for p in ref)
+                    pass_spp = min(pass_spp, int((self.time - elapsed) / per_spp))
+                    if pass_spp < 1:
+                        break
+            self.run_pass(self.final, pass_spp, "final", split=split)
+            pass_spp *= 2

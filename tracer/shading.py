@@ -1,0 +1,160 @@
+"""The steps of shading one path vertex, as jitted helpers any path kernel can call.
+
+tracer.integrator.shade strings them together for the unidirectional path tracer; a second
+kernel (e.g. the gradient-domain tracer's offset paths) calls the same ones, so NEE, MIS and the
+guide mixture exist once:
+
+    emitted_surface / emitted_env   emission found by a path, with its MIS weight against NEE
+    next_event                      next-event estimation: light sample, BSDF, MIS weight, shadow ray
+    sample_mixture / mixture_pdf    the direction from the one-sample MIS mixture of BSDF and guide
+                                    (practical path guiding's sampleMat / pdfMat), and its density
+    russian_roulette                continue or end, on the throughput BSDF sampling would have had
+
+Conventions: directions are unit 3-tuples; `wo`, `wi` in the local shading frame (s, t, n) of
+tracer.sampling.frame unless named `*w` (world); densities are per unit solid angle; colours are
+RGB 3-tuples. `a` is the probability of BSDF sampling in the mixture p = a p_bsdf + (1 - a) p_guide
+(1: no guide at this vertex), `slot` the guide's sampling map there (tracer.guiding.spatial.locate).
+"""
+import math
+
+import numpy as np
+
+from . import bsdfs
+from ._jit import jit
+from .guiding.spatial import slot_pdf, slot_sample
+from .lights import env_pdf, env_radiance, sample_light, triangle_emission, triangle_light_pdf
+from .sampling import dot, power_heuristic, to_local, to_world
+
+BLACK = (0.0, 0.0, 0.0)
+
+
+@jit
+def offset_point(x, ng, w, eps):
+    """x pushed off the surface by eps along the normal ng, to the side direction w leaves on (eps:
+    the triangle's entry of tracer.bvh.ray_offsets)."""
+    s = eps if dot(w, ng) >= 0.0 else -eps
+    return (x[0] + s * ng[0], x[1] + s * ng[1], x[2] + s * ng[2])
+
+
+@jit(inline="always")
+def shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps):
+    """(origin, unit direction, tmax) of the shadow ray from x (normal ng, offset eps) toward the
+    light sample at distance dist along wl, on triangle lt_tri (-1: the environment, tmax inf).
+    Both ends are offset by their own triangle's ray_offsets, the light's end along its normal
+    toward x (pbrt-v4's SpawnRayTo), so the ray stops short of the light's plane as Embree sees it.
+    tmax <= 0 means there is no room for a ray (x on the light)."""
+    o = offset_point(x, ng, wl, eps)
+    if lt_tri < 0:
+        return o, wl, np.inf
+    li = lt.light_of_tri[lt_tri]
+    el = tri_eps[lt_tri]
+    y = (x[0] + dist * wl[0] + el * lt.normal[li, 0], x[1] + dist * wl[1] + el * lt.normal[li, 1],
+         x[2] + dist * wl[2] + el * lt.normal[li, 2])
+    d = (y[0] - o[0], y[1] - o[1], y[2] - o[2])
+    tmax = math.sqrt(dot(d, d))
+    if not tmax > 0.0:
+        return o, wl, 0.0
+    inv = 1.0 / tmax
+    return o, (d[0] * inv, d[1] * inv, d[2] * inv), tmax
+
+
+@jit(inline="always")
+def emitted_env(lt, wray, depth, prev_pdf, prev_delta):
+    """(radiance, MIS weight) of the environment (lt.env_type != ENV_NONE) seen along wray (world)
+    by a path that escaped after `depth` bounces; its last direction had solid-angle density
+    prev_pdf (prev_delta: from a delta lobe, or the camera at depth 0: weight 1)."""
+    le = env_radiance(lt, wray)
+    w = 1.0
+    if depth > 0 and not prev_delta:
+        w = power_heuristic(prev_pdf, env_pdf(lt, wray))
+    return le, w
+
+
+@jit(inline="always")
+def emitted_surface(lt, p, dist2, cos_o, depth, prev_pdf, prev_delta):
+    """(radiance, MIS weight) emitted by light triangle p (lt.light_of_tri[p] >= 0) toward a path
+    arriving at squared distance dist2 with cos_o the cosine to its normal (> 0 on the emitting
+    side); weights as emitted_env."""
+    le = triangle_emission(lt, p, cos_o)
+    w = 1.0
+    if depth > 0 and not prev_delta:
+        w = power_heuristic(prev_pdf, triangle_light_pdf(lt, p, dist2, cos_o))
+    return le, w
+
+
+@jit(inline="always")
+def mixture_pdf(gs, slot, a, pb, wiw):
+    """Density of world direction wiw under the mixture a p_bsdf + (1 - a) p_guide, given the
+    BSDF's own density pb of it (pdfMat); pb where a is 1."""
+    if a < 1.0:
+        return a * pb + (1.0 - a) * slot_pdf(gs, slot, wiw)
+    return pb
+
+
+@jit(inline="always")
+def next_event(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0,
+               u_pos1):
+    """Next-event estimation at a non-delta vertex x (normal ng, frame s, t, ng, outgoing wo local),
+    material m, path throughput beta: one light sample (u_light, u_pos0, u_pos1), MIS-weighted by
+    the power heuristic against the mixture density of the same direction. Returns (ok, origin,
+    unit direction, tmax, contribution beta f le w / p_light): the shadow ray to trace, and what it
+    adds if unblocked. ok is False where nothing is to be traced."""
+    wl, dist, le, pl, lt_tri = sample_light(lt, tri, x, u_light, u_pos0, u_pos1)
+    if not (pl > 0.0 and (le[0] > 0.0 or le[1] > 0.0 or le[2] > 0.0)):
+        return False, x, wl, 0.0, BLACK
+    wil = to_local(wl, s, t, ng)
+    f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wil, True)
+    if not (f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0):
+        return False, x, wl, 0.0, BLACK
+    pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wil), wl)
+    w = power_heuristic(pl, pb)
+    so, sd, tmax = shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps)
+    if not tmax > 0.0:
+        return False, x, wl, 0.0, BLACK
+    return True, so, sd, tmax, (beta[0] * f[0] * le[0] * w / pl, beta[1] * f[1] * le[1] * w / pl,
+                                beta[2] * f[2] * le[2] * w / pl)
+
+
+@jit(inline="always")
+def sample_mixture(mat_type, mat_param, m, gs, slot, a, wo, s, t, ng, u0, u1, u_lobe, u_strategy):
+    """Sample the continuation from the mixture (sampleMat): the guide's map `slot` with probability
+    1 - a (u_strategy >= a), else the BSDF (u_lobe picks its lobe); u0, u1 the direction.
+    Returns (wiw world direction, weight f cos / pdf (RGB), pdf of the mixture, p_bsdf of wiw, delta
+    (sampled a delta lobe: pdf is then the lobe's probability), strategy 0 BSDF / 1 guide, ratio
+    p_bsdf / pdf (1 without a guide, or at a delta lobe))."""
+    if a < 1.0 and u_strategy >= a:
+        wiw, pg = slot_sample(gs, slot, u0, u1)
+        wi = to_local(wiw, s, t, ng)
+        f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wi, True)
+        pbs = bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wi)
+        pdf = a * pbs + (1.0 - a) * pg
+        wt = BLACK
+        ratio = 1.0
+        if pdf > 0.0:
+            inv = 1.0 / pdf
+            wt = (f[0] * inv, f[1] * inv, f[2] * inv)
+            ratio = pbs * inv
+        return wiw, wt, pdf, pbs, False, 1, ratio
+    wi, wt, pdf, dlt = bsdfs.bsdf_sample(mat_type, mat_param, m, wo, u0, u1, u_lobe, True)
+    wiw = to_world(wi, s, t, ng)
+    pbs = pdf
+    ratio = 1.0
+    if a < 1.0 and pdf > 0.0 and not dlt:
+        pm = mixture_pdf(gs, slot, a, pdf, wiw)
+        ratio = pdf / pm
+        wt = (wt[0] * ratio, wt[1] * ratio, wt[2] * ratio)
+        pdf = pm
+    return wiw, wt, pdf, pbs, dlt, 0, ratio
+
+
+@jit(inline="always")
+def russian_roulette(beta, gain, u):
+    """Continue with probability q = min(max(beta) / gain, 0.95), deciding by u: (survives, beta / q).
+    beta / gain is the throughput BSDF sampling would have had: on beta itself the roulette would
+    undo a guide, since a guided direction's small weight f cos / p would be raised back to ~1 by
+    a matching chance of death (a path's survival density ~ f cos)."""
+    bmax = max(beta[0], max(beta[1], beta[2]))
+    q = min(bmax / gain, 0.95)
+    if u >= q:
+        return False, beta
+    return True, (beta[0] / q, beta[1] / q, beta[2] / q)

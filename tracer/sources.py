@@ -1,0 +1,196 @@
+"""Ray sources: where the paths of a wave start (tracer.integrator.trace_wave's `source`).
+
+A source fills, for the wave's paths g0 .. g0+n-1, the path slots 0 .. n-1 of a WaveBuffers:
+the film pixel (or, for probe rays, the caller's row), the random-stream key, the first ray,
+a per-path weight, and the reset path state; it returns the wave's PrimarySamples (the sample
+seam, tracer.rng.draw). Sources:
+
+    CameraSource()                    the camera: path g is sample sample0 + g // P of film pixel g % P
+    CameraSource(shift=(dx, dy))      the same keys and pixel positions, each ray through the
+                                      neighbouring pixel (x + dx, y + dy): gradient-domain random replay
+    PrimarySampleSource(u, dims, weight)  the camera with external primary samples u for
+                                      dimensions dims (rng.pss_dims(m)) and a weight per path
+    ProbeSource(origins, directions, keys)  given rays with given keys; pixel = the ray's row
+
+A source's `count(spp)` is the number of paths of a pass of spp samples per pixel; `weighted`
+says whether the sink must multiply the weights in.
+"""
+import numpy as np
+from numba import prange
+
+from ._jit import jit, kernel
+from .camera import camera_ray
+from .film import N_AOV
+from .rng import DIM_PIXEL, draw, no_primary_samples, path_key, primary_samples
+
+
+@jit(inline="always")
+def _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain):
+    for c in range(3):
+        beta[i, c] = 1.0
+        L[i, c] = 0.0
+    depth[i] = 0
+    prev_pdf[i] = 0.0
+    prev_delta[i] = False
+    prev_rec[i] = -1
+    gain[i] = 1.0
+    for c in range(N_AOV):
+        aov[i, c] = 0.0
+
+
+@kernel
+def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, whole_image, ps, pix, key, ray_o, ray_d,
+                 beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain):
+    """Camera rays for global path indices g0 .. g0+n-1 of a pass (sample-major order).
+
+    crop = (x0, y0, w, h): the film covers that window of the width x height image; pix[i] is the
+    film pixel, while the random stream is keyed by the image pixel, so a cropped render
+    reproduces the same window of the full one exactly. jitter: True for the box filter (the
+    position inside the pixel from dimensions DIM_PIXEL, DIM_PIXEL + 1), False for the point
+    filter (the pixel centre). shift = (dx, dy): the ray goes through pixel (x + dx, y + dy) at the
+    same position inside it, with the key and film pixel of (x, y). whole_image: the two pixel
+    dimensions place the sample anywhere in the crop window (its film pixel follows), for a warp
+    of the whole image plane; else inside the path's own pixel.
+    """
+    n = pix.shape[0]
+    cw = crop[2]
+    npix = crop[2] * crop[3]
+    for i in prange(n):
+        g = g0 + i
+        s = sample0 + g // npix
+        p = g % npix
+        px = crop[0] + p % cw
+        py = crop[1] + p // cw
+        k = path_key(seed, py * width + px, s)
+        jx = draw(ps, k, i, DIM_PIXEL) if jitter else 0.5
+        jy = draw(ps, k, i, DIM_PIXEL + 1) if jitter else 0.5
+        if whole_image:
+            fx = min(jx * cw, cw - 1e-9)
+            fy = min(jy * crop[3], crop[3] - 1e-9)
+            qx = int(fx)
+            qy = int(fy)
+            jx = fx - qx
+            jy = fy - qy
+            p = qy * cw + qx
+            px = crop[0] + qx
+            py = crop[1] + qy
+        pix[i] = p
+        key[i] = k
+        o, d = camera_ray(cam, width, height, px + shift[0], py + shift[1], jx, jy)
+        for c in range(3):
+            ray_o[i, c] = o[c]
+            ray_d[i, c] = d[c]
+        _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain)
+
+
+@kernel
+def probe_paths(origins, directions, keys, g0, pix, key, ray_o, ray_d, beta, L, depth, prev_pdf, prev_delta, aov,
+                prev_rec, gain):
+    """Paths from given rays g0 .. g0+n-1: pix[i] = g0 + i (the row), key and ray as given."""
+    for i in prange(pix.shape[0]):
+        g = g0 + i
+        pix[i] = g
+        key[i] = keys[g]
+        for c in range(3):
+            ray_o[i, c] = origins[g, c]
+            ray_d[i, c] = directions[g, c]
+        _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain)
+
+
+class CameraSource:
+    """Camera rays through every pixel of the film (see camera_paths); shift=(dx, dy) sends each
+    ray through the neighbouring pixel with the base pixel's key and film pixel."""
+
+    weighted = False
+
+    def __init__(self, shift=(0, 0)):
+        self.shift = np.asarray(shift, dtype=np.int64)
+        if self.shift.shape != (2,):
+            raise ValueError(f"shift must be (dx, dy), got {shift!r}")
+        self._ps = no_primary_samples()
+
+    def count(self, ctx, spp):
+        return spp * ctx.n_pixels
+
+    def _primary(self, g0, n):
+        return self._ps
+
+    def start(self, ctx, buf, sample0, g0, n):
+        ps = self._primary(g0, n)
+        camera_paths(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, ctx.seed, sample0, g0,
+                     self.shift, self._whole_image(), ps, buf.pix[:n], buf.key[:n], buf.ray_o[:n], buf.ray_d[:n],
+                     buf.beta[:n], buf.L[:n], buf.depth[:n], buf.prev_pdf[:n], buf.prev_delta[:n], buf.aov[:n],
+                     buf.prev_rec[:n], buf.gain[:n])
+        return ps
+
+    def _whole_image(self):
+        return False
+
+    def __repr__(self):
+        return "CameraSource()" if not self.shift.any() else f"CameraSource(shift={tuple(int(v) for v in self.shift)})"
+
+
+class PrimarySampleSource(CameraSource):
+    """The camera with external primary samples: u (N, D) in [0, 1) supplies dimensions `dims`
+    (e.g. rng.pss_dims(m)) of paths 0 .. N-1 of the pass, weight (N,) multiplies each path's value
+    (e.g. 1 / the warp's density). whole_image: dims 0 and 1 place the sample anywhere in the film
+    (a warp of the image plane; the film then counts samples where they land), else inside the
+    path's own pixel. A pass renders N paths (count ignores spp)."""
+
+    weighted = True
+
+    def __init__(self, u, dims, weight=None, whole_image=False):
+        super().__init__()
+        self._all = primary_samples(u, dims)
+        n = self._all.u.shape[0]
+        self.weight = np.ones(n) if weight is None else np.ascontiguousarray(weight, dtype=np.float64)
+        if self.weight.shape != (n,):
+            raise ValueError(f"weight must be ({n},), got {self.weight.shape}")
+        self.whole_image = bool(whole_image)
+
+    def count(self, ctx, spp):
+        return self._all.u.shape[0]
+
+    def _primary(self, g0, n):
+        return self._all._replace(u=self._all.u[g0:g0 + n])
+
+    def _whole_image(self):
+        return self.whole_image
+
+    def start(self, ctx, buf, sample0, g0, n):
+        ps = super().start(ctx, buf, sample0, g0, n)
+        buf.weight[:n] = self.weight[g0:g0 + n]
+        return ps
+
+    def __repr__(self):
+        return f"PrimarySampleSource({self._all.u.shape[0]} paths, {self._all.u.shape[1]} dims)"
+
+
+class ProbeSource:
+    """Given rays: origins, directions (N, 3) float64 world (unit directions), keys (N,) uint64 (e.g.
+    rng.path_key(seed, i, 0)). Path g starts at ray g; its sample goes to sink index g. The first
+    hit is bounce 0 (what it emits counts in full). A pass renders the N rays (count ignores spp)."""
+
+    weighted = False
+
+    def __init__(self, origins, directions, keys):
+        self.origins = np.ascontiguousarray(origins, dtype=np.float64)
+        self.directions = np.ascontiguousarray(directions, dtype=np.float64)
+        self.keys = np.ascontiguousarray(keys, dtype=np.uint64)
+        n = self.origins.shape[0]
+        if self.origins.shape != (n, 3) or self.directions.shape != (n, 3) or self.keys.shape != (n,):
+            raise ValueError(f"origins and directions must be (n, 3) and keys (n,), got {self.origins.shape}, "
+                             f"{self.directions.shape}, {self.keys.shape}")
+        self._ps = no_primary_samples()
+
+    def count(self, ctx, spp):
+        return self.origins.shape[0]
+
+    def start(self, ctx, buf, sample0, g0, n):
+        probe_paths(self.origins, self.directions, self.keys, g0, buf.pix[:n], buf.key[:n], buf.ray_o[:n],
+                    buf.ray_d[:n], buf.beta[:n], buf.L[:n], buf.depth[:n], buf.prev_pdf[:n], buf.prev_delta[:n],
+                    buf.aov[:n], buf.prev_rec[:n], buf.gain[:n])
+        return self._ps
+
+    def __repr__(self):
+        return f"ProbeSource({self.origins.shape[0]} rays)"

@@ -1,0 +1,162 @@
+"""The structure-of-arrays state of a wave of paths, and the bookkeeping kernels between stages.
+
+`WaveBuffers` holds every per-path and per-entry array of a wave, allocated once per render;
+`compact` packs the continuing paths and the shadow rays after shading; `add_unoccluded` adds
+the shadow rays that got through; `sanitize` zeroes (and counts) non-finite samples before a
+sink sees them; `Stats` keeps wall time per stage and ray counts.
+
+Paths live in slots (path index i: beta, L, depth, key, pix, ...); the entries of a bounce
+(index k) are the active paths in order, `active[k]` being entry k's slot. Hit arrays and the
+rays of a bounce are per entry.
+"""
+import math
+import time
+
+import numpy as np
+from numba import prange
+
+from ._jit import kernel
+from .film import N_AOV
+from .guiding.records import Records
+
+_CHUNKS = 64  # compaction splits a batch into this many chunks, counted then written in parallel
+
+
+@kernel
+def compact(active, alive, next_o, next_d, has_shadow, sh_o, sh_d, sh_tmax, sh_L,
+            dst_active, dst_o, dst_d, sp_path, sp_entry, sp_o, sp_d, sp_tmax, sp_L):
+    """Pack the continuing paths (alive) and the shadow rays (has_shadow) to the front of the
+    dst_* and sp_* arrays, keeping their order (sp_entry: the entry k a shadow ray came from).
+    Returns (continuing, shadow rays).
+
+    Two parallel passes over chunks: count per chunk, then write at the prefix-sum offsets.
+    """
+    n = active.shape[0]
+    counts = np.zeros((_CHUNKS + 1, 2), np.int64)
+    for c in prange(_CHUNKS):
+        lo = c * n // _CHUNKS
+        hi = (c + 1) * n // _CHUNKS
+        a = 0
+        b = 0
+        for k in range(lo, hi):
+            a += alive[k]
+            b += has_shadow[k]
+        counts[c + 1, 0] = a
+        counts[c + 1, 1] = b
+    for c in range(_CHUNKS):
+        counts[c + 1, 0] += counts[c, 0]
+        counts[c + 1, 1] += counts[c, 1]
+    for c in prange(_CHUNKS):
+        lo = c * n // _CHUNKS
+        hi = (c + 1) * n // _CHUNKS
+        j = counts[c, 0]
+        js = counts[c, 1]
+        for k in range(lo, hi):
+            if alive[k]:
+                dst_active[j] = active[k]
+                for q in range(3):
+                    dst_o[j, q] = next_o[k, q]
+                    dst_d[j, q] = next_d[k, q]
+                j += 1
+            if has_shadow[k]:
+                sp_path[js] = active[k]
+                sp_entry[js] = k
+                sp_tmax[js] = sh_tmax[k]
+                for q in range(3):
+                    sp_o[js, q] = sh_o[k, q]
+                    sp_d[js, q] = sh_d[k, q]
+                    sp_L[js, q] = sh_L[k, q]
+                js += 1
+    return counts[_CHUNKS, 0], counts[_CHUNKS, 1]
+
+
+@kernel
+def add_unoccluded(path, occluded, contrib, L, entry, rec_L0, rec_base, record):
+    """L[path[j]] += contrib[j] where the shadow ray was not blocked (one entry per path).
+    With `record`, the same goes into the L0 of the vertex's record, so that the radiance
+    recorded along the vertex's sampled direction leaves out the vertex's own NEE."""
+    for j in prange(path.shape[0]):
+        if not occluded[j]:
+            i = path[j]
+            for c in range(3):
+                L[i, c] += contrib[j, c]
+            if record:
+                r = rec_base + entry[j]
+                for c in range(3):
+                    rec_L0[r, c] += contrib[j, c]
+
+
+@kernel
+def sanitize(L):
+    """Zero non-finite samples (never written to the film); returns how many there were."""
+    bad = 0
+    for i in prange(L.shape[0]):
+        if not (math.isfinite(L[i, 0]) and math.isfinite(L[i, 1]) and math.isfinite(L[i, 2])):
+            L[i, 0] = 0.0
+            L[i, 1] = 0.0
+            L[i, 2] = 0.0
+            bad += 1
+    return bad
+
+
+class WaveBuffers:
+    """Structure-of-arrays path state for waves of up to `size` paths, allocated once; with `split`,
+    room for as many copies again (trace_wave's `split`)."""
+
+    def __init__(self, size, split=False):
+        self.size = size
+        size = 2 * size if split else size
+        self.capacity = size
+        self.parent = np.zeros(size if split else 1, np.int64)  # path a copy adds into
+        self.ks = np.zeros(size if split else 1, np.int64)  # copies per entry, in a bounce that splits
+        z3 = lambda: np.zeros((size, 3))  # noqa: E731
+        self.pix = np.zeros(size, np.int64)
+        self.key = np.zeros(size, np.uint64)
+        self.beta, self.L = z3(), z3()
+        self.depth = np.zeros(size, np.int32)
+        self.prev_pdf = np.zeros(size)
+        self.prev_delta = np.zeros(size, np.bool_)
+        self.gain = np.ones(size)
+        self.prev_rec = np.zeros(size, np.int64)
+        self.aov = np.zeros((size, N_AOV))
+        self.active = np.zeros(size, np.int64)
+        self.active2 = np.zeros(size, np.int64)
+        self.ray_o, self.ray_d, self.next_o, self.next_d = z3(), z3(), z3(), z3()
+        self.alive = np.zeros(size, np.bool_)
+        self.sh_o, self.sh_d, self.sh_L = z3(), z3(), z3()
+        self.sh_tmax = np.zeros(size)
+        self.has_shadow = np.zeros(size, np.bool_)
+        self.sp_path = np.zeros(size, np.int64)
+        self.sp_entry = np.zeros(size, np.int64)
+        self.weight = np.ones(size)  # the source's per-path weight (the sink multiplies it in)
+        self.records = Records.allocate(1)  # grown on demand when a guide records
+        self.sp_o, self.sp_d, self.sp_L = z3(), z3(), z3()
+        self.sp_tmax = np.zeros(size)
+        self._hits = ()  # hit arrays of a bounce with copies (copy_hits)
+
+    def copy_hits(self, *hits):
+        """Arrays with room for `capacity` entries, of the dtypes of `hits` (t, prim, b1, b2): where
+        split_paths writes a bounce's hits with its copies. Allocated once."""
+        if tuple(a.dtype for a in self._hits) != tuple(a.dtype for a in hits):
+            self._hits = tuple(np.empty(self.capacity, a.dtype) for a in hits)
+        return self._hits
+
+
+class Stats:
+    """Wall time per stage and ray counts."""
+
+    STAGES = ("camera", "intersect", "split", "shade", "occluded", "compact", "film", "record")
+
+    def __init__(self):
+        self.time = {s: 0.0 for s in self.STAGES}
+        self.rays = 0
+        self.shadow_rays = 0
+        self.samples = 0
+        self.nonfinite = 0
+        self.split_copies = 0
+        self.window_ended = 0
+
+    def tick(self, stage, t0):
+        t1 = time.perf_counter()
+        self.time[stage] += t1 - t0
+        return t1
