@@ -46,7 +46,8 @@ MAX_BOUNCES = 4096
 
 
 @kernel
-def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs, ps, max_depth, rr_depth,
+def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, lt, gs,
+          ps, max_depth, rr_depth,
           beta, L, depth, prev_pdf, prev_delta, gain, key, pix, aov,
           alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
           record, rec_base, prev_rec, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0,
@@ -80,7 +81,6 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs, ps, max_depth, rr
         dk = depth[i]                                   # bounces so far (0 at the first hit)
         wray = (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2])  # direction the path arrived along
         b = (beta[i, 0], beta[i, 1], beta[i, 2])        # throughput up to this vertex
-        kk = key[i]                                     # the path's random stream
         p = prim[k]
         if p < 0:
             # Escaped: environment light, MIS-weighted against NEE's choice of it
@@ -95,9 +95,9 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs, ps, max_depth, rr
             continue
 
         # Hit point (from barycentrics: on the triangle's plane) and geometric normal
-        x = triangle_point(surf.tri, p, b1[k], b2[k])
-        ng = (surf.normal[p, 0], surf.normal[p, 1], surf.normal[p, 2])  # unit, counter-clockwise side
-        m = surf.material[p]
+        x = triangle_point(tri, p, b1[k], b2[k])
+        ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])  # unit, counter-clockwise side
+        m = tri_material[p]
         cos_o = -dot(wray, ng)  # > 0 when the path arrived on the counter-clockwise side
 
         # Emission, MIS-weighted against NEE's choice of this triangle
@@ -112,7 +112,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs, ps, max_depth, rr
 
         # AOVs at the first hit: albedo, normal facing the camera, distance
         if dk == 0:
-            al = bsdfs.bsdf_albedo(surf.mat_type, surf.mat_param, m)
+            al = bsdfs.bsdf_albedo(mat_type, mat_param, m)
             sgn = 1.0 if cos_o >= 0.0 else -1.0
             for c in range(3):
                 aov[i, c] = al[c]
@@ -124,21 +124,22 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs, ps, max_depth, rr
             continue
         s, tt = frame(ng)
         wo = to_local((-wray[0], -wray[1], -wray[2]), s, tt, ng)
-        delta = bsdfs.bsdf_is_delta(surf.mat_type, surf.mat_param, m)
+        kk = key[i]  # the path's random stream
+        delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
 
         # Where the guide's map is (node, slot) and the mixing weight a (probability of BSDF sampling)
         node = -1
         slot = -1
         a = 1.0
         nf = ng if cos_o >= 0.0 else (-ng[0], -ng[1], -ng[2])  # normal on the side the path arrived
-        if not delta:
+        if not delta and (gs.res[0] > 0 or gs.pixel_slot.shape[0] > 0):
             node, slot, a = locate(gs, x, nf, pix[i], dk)
 
         # Next-event estimation (not at delta BSDFs)
         if not delta:
             ok, so, sd, tmax, contrib = next_event(
-                surf.mat_type, surf.mat_param, m, lt, surf.tri, x, ng, s, tt, wo, b, gs, slot, a, surf.eps[p],
-                surf.eps, draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
+                mat_type, mat_param, m, lt, tri, x, ng, s, tt, wo, b, gs, slot, a, tri_eps[p],
+                tri_eps, draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
                 draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)))
             if ok:
                 for c in range(3):
@@ -151,7 +152,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs, ps, max_depth, rr
         # Sample the continuation from the mixture: the guide with probability 1 - a, else the BSDF
         u_strategy = draw(ps, kk, i, bounce_dim(dk, STRATEGY)) if a < 1.0 else 1.0
         wiw, wt, pdf, pbs, dlt, strategy, ratio = sample_mixture(
-            surf.mat_type, surf.mat_param, m, gs, slot, a, wo, s, tt, ng, draw(ps, kk, i, bounce_dim(dk, DIR)),
+            mat_type, mat_param, m, gs, slot, a, wo, s, tt, ng, draw(ps, kk, i, bounce_dim(dk, DIR)),
             draw(ps, kk, i, bounce_dim(dk, DIR + 1)), draw(ps, kk, i, bounce_dim(dk, LOBE)), u_strategy)
         gn = gain[i] * ratio  # product of p_bsdf / p_mixture along the path (1 without a guide)
         nb = (b[0] * wt[0], b[1] * wt[1], b[2] * wt[2])
@@ -189,7 +190,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs, ps, max_depth, rr
         if not ok:
             continue
 
-        no = offset_point(x, ng, wiw, surf.eps[p])
+        no = offset_point(x, ng, wiw, tri_eps[p])
         for c in range(3):
             beta[i, c] = nb[c]
             next_o[k, c] = no[c]
@@ -237,7 +238,7 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
             t0 = stats.tick("split", t0)
         if record > 0 and n_rec + n_active > rec.strategy.shape[0]:
             rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
-        shade(active[:n_active], ro, rd, *hits, ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth,
+        shade(active[:n_active], ro, rd, *hits, *ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth,
               ctx.rr_depth, buf.beta, buf.L, buf.depth, buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.pix,
               buf.aov, buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow,
               record, n_rec, buf.prev_rec, **rec.kernel_args())

@@ -1,10 +1,12 @@
 """The library entry point: `render(scene, spp=..., guide="bsdf", ...) -> RenderResult`.
 
-A render runs as passes over the whole image; each pass renders some samples per pixel
-in waves of at most `wave_size` paths (memory stays flat with image size). Between passes a
-callback may look at the film (guides learn there). With `time=S` the passes continue,
-doubling in size, until the next one would not fit in the budget. Ctrl-C stops the render
-between waves and returns what was rendered so far (see render()).
+A render runs as passes over the whole image, in the order the method's schedule gives
+(tracer.session); each pass renders some samples per pixel in waves of at most `wave_size`
+paths (memory stays flat with image size). Between passes a callback may look at the film
+(guides learn there). With `time=S` the final passes continue, doubling in size, until the next
+one would not fit in the budget. Ctrl-C stops the render between waves and returns what was
+rendered so far (see render()). `make_context` and session.trace_source trace any ray source
+(tracer.sources) outside a render.
 """
 import json
 import math
@@ -90,10 +92,11 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     crop       (x0, y0, w, h): render only that window of the image (its pixels are the same
                samples as in the full render)
 
-    With a guide that learns, the passes follow Algorithm 1 of Zhu et al. 2021: a 1-spp pilot,
-    training iterations of 2^t spp (each followed by the guide's update), then a final guided
-    pass with what the budget has left; the image combines the training iterations and the final
-    pass weighted by the inverse of each one's mean pixel variance (the pilot is not used).
+    The method runs its own schedule of passes (guide.schedule(session), tracer.session): BSDF
+    sampling and guides that learn nothing render final passes alone; `grid` and `photon` run
+    Algorithm 1 of Zhu et al. 2021 (tracer.guiding.schedule): a 1-spp pilot, training iterations
+    of 2^t spp, then final guided passes; the image combines the films of the passes weighted by
+    the inverse of each one's mean pixel variance (the pilot is not used).
 
     Ctrl-C (SIGINT, when render runs in the main thread) stops the render before the next wave:
     the wave in flight finishes, and a second Ctrl-C stops at once. The result then has
@@ -119,9 +122,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                        callback, guide_settings, pixel_filter, crop)
 
 
-def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress, callback,
-            guide_settings, pixel_filter, crop):
-    """render() on n_threads Numba threads."""
+def _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop):
+    """(max_depth, rr_depth, seed, crop) checked, the scene's render settings where None."""
     rs = scene.render
     max_depth = rs.max_depth if max_depth is None else max_depth
     rr_depth = rs.rr_depth if rr_depth is None else rr_depth
@@ -133,6 +135,26 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     if pixel_filter not in FILTERS:
         raise unknown_name("pixel filter", pixel_filter, FILTERS)
     seed = _int_setting("seed", seed, 0)
+    return max_depth, rr_depth, seed, crop
+
+
+def make_context(scene, accel="embree", seed=None, max_depth=None, rr_depth=None, pixel_filter="box", crop=None,
+                 threads=None):
+    """A RenderContext for tracing sources outside render() (session.trace_source): probe rays for
+    training data or ground truth, a method's own passes. Settings as render(); threads: the
+    accel's worker threads (Numba's kernels use the process's thread count)."""
+    max_depth, rr_depth, seed, crop = _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop)
+    if threads is not None:
+        threads = _int_setting("threads", threads, 1)
+    acc = make_accel(accel, scene.tri, threads=threads or numba.config.NUMBA_NUM_THREADS)
+    return RenderContext(scene, acc, build_lights(scene), seed, max_depth, rr_depth, pixel_filter, crop)
+
+
+def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress, callback,
+            guide_settings, pixel_filter, crop):
+    """render() on n_threads Numba threads."""
+    rs = scene.render
+    max_depth, rr_depth, seed, crop = _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop)
     wave_size = _int_setting("wave_size", wave_size, 1)
     if time is None:
         spp = _int_setting("spp", rs.spp if spp is None else spp, 1)

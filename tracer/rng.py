@@ -43,7 +43,8 @@ with P_BOUNCE = 5 and PB = 4.
 from typing import NamedTuple
 
 import numpy as np
-from numba import prange
+from numba import prange, types
+from numba.extending import overload
 
 from ._jit import jit, kernel
 
@@ -111,8 +112,9 @@ class PrimarySamples(NamedTuple):
 
 
 def no_primary_samples():
-    """A PrimarySamples that supplies nothing: every dimension comes from the stream."""
-    return PrimarySamples(np.zeros(0, np.int64), np.zeros((0, 0)))
+    """What a source without external samples passes: None (every dimension from the stream; the
+    kernels are compiled for it apart, so the seam costs the camera nothing)."""
+    return None
 
 
 def primary_samples(u, dims):
@@ -128,15 +130,31 @@ def primary_samples(u, dims):
     return PrimarySamples(col, u)
 
 
-@jit(inline="always")
 def draw(ps, key, row, dim):
-    """Dimension `dim` of the path in wave slot `row` with key `key`: from ps where it supplies
-    that dimension for that row, else uniform(key, dim)."""
-    if dim < ps.col.shape[0] and row < ps.u.shape[0]:
+    """Dimension `dim` of the path in wave slot `row` with key `key`: from ps (a PrimarySamples)
+    where it supplies that dimension for that row, else (and always when ps is None)
+    uniform(key, dim). Jitted code gets the implementation for ps's type (see _draw)."""
+    if ps is not None and dim < ps.col.shape[0] and row < ps.u.shape[0]:
         c = ps.col[dim]
         if c >= 0:
-            return ps.u[row, c]
+            return float(ps.u[row, c])
     return uniform(key, dim)
+
+
+@overload(draw, inline="always")
+def _draw(ps, key, row, dim):
+    if isinstance(ps, types.NoneType):
+        def stream(ps, key, row, dim):
+            return uniform(key, dim)
+        return stream
+
+    def supplied(ps, key, row, dim):
+        if dim < ps.col.shape[0] and row < ps.u.shape[0]:
+            c = ps.col[dim]
+            if c >= 0:
+                return ps.u[row, c]
+        return uniform(key, dim)
+    return supplied
 
 
 @jit

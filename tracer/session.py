@@ -12,6 +12,26 @@ import time as _time
 from .film import Film
 from .integrator import trace_wave
 from .sources import CameraSource
+from .wave import Stats, WaveBuffers
+
+
+def trace_source(ctx, source, sink, spp=1, sample0=0, buf=None, stats=None, observe=None, direct=True, split=None,
+                 before_wave=None):
+    """Trace every path of one pass of `source` (tracer.sources) into `sink` (a Film or a
+    film.SampleSink), in waves of buf.size paths (buf: a wave.WaveBuffers, made for the pass if
+    None). ctx: a RenderContext (render.make_context); spp: the pass's samples per pixel, for
+    sources that count by it; sample0: the sample index it starts at. observe, direct, split: as
+    integrator.trace_wave. before_wave(n), if given, is called before each wave of n paths (it may
+    raise to stop). Returns the wave.Stats."""
+    total = source.count(ctx, spp)
+    buf = WaveBuffers(max(1, min(total, 1 << 16)), split=split is not None) if buf is None else buf
+    stats = Stats() if stats is None else stats
+    for g0 in range(0, total, buf.size):
+        n = min(buf.size, total - g0)
+        if before_wave is not None:
+            before_wave(n)
+        trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=observe, direct=direct, split=split)
+    return stats
 
 
 class Stop(Exception):
@@ -66,17 +86,9 @@ class Session:
         ctx, buf, g = self.ctx, self.buf, self.guide
         source = self.camera if source is None else source
         tp = _time.perf_counter()
-        total = source.count(ctx, spp)
         observe = g.observe if learn else None
         direct = g.learn_direct if g is not None else True
-        for g0 in range(0, total, buf.size):
-            if self.interrupted():
-                raise KeyboardInterrupt  # between waves: every finished wave is whole in the film
-            n = min(buf.size, total - g0)
-            trace_wave(ctx, buf, source, film, self.sample0, g0, n, self.stats, observe=observe, direct=direct,
-                       split=split)
-            if self.bar is not None:
-                self.bar.update(n / ctx.n_pixels)
+        trace_source(ctx, source, film, spp, self.sample0, buf, self.stats, observe, direct, split, self._before_wave)
         self.sample0 += spp
         entry = {"spp": spp, "time": _time.perf_counter() - tp, "kind": kind, "film": len(self.films) - 1}
         if learn:
@@ -87,6 +99,12 @@ class Session:
         self.passes.append(entry)
         if self.callback is not None and self.callback(len(self.passes) - 1, film, self.snapshot()) is False:
             raise Stop
+
+    def _before_wave(self, n):
+        if self.interrupted():
+            raise KeyboardInterrupt  # between waves: every finished wave is whole in the film
+        if self.bar is not None:
+            self.bar.update(n / self.ctx.n_pixels)
 
     def final_passes(self, split=None):
         """Fill the rest of the budget with final passes into self.final: each twice the last pass's
