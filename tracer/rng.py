@@ -22,9 +22,9 @@ The sample seam: every random number of a camera path is `draw(ps, key, row, dim
 counter-based stream, except for the dimensions that a caller supplies in a `PrimarySamples`
 (an external vector per path, e.g. a primary-sample-space warp's output): `pss_dims(m)` lists
 the ones a warp replaces, the pixel position and the direction of the first m bounces.
-A path split into copies at bounce k (tracer.integrator, `split`) keeps its key; copy j >= 1
+A path split into copies at bounce k (tracer.splitting) keeps its key; copy j >= 1
 takes `split_key(key, k, j)`, a fresh key that draws the same table from bounce k on. The weight
-window's roulette at bounce k (integrator.split_counts) draws `uniform(split_key(key, k, 0), 0)`,
+window's roulette at bounce k (splitting.split_counts) draws `uniform(split_key(key, k, 0), 0)`,
 from a key no copy gets.
 
 Photons (light paths traced to feed guides) have their own keys, `photon_key(seed, iteration,
