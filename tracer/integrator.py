@@ -151,9 +151,10 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
 
         # Sample the continuation from the mixture: the guide with probability 1 - a, else the BSDF
         u_strategy = draw(ps, kk, i, bounce_dim(dk, STRATEGY)) if a < 1.0 else 1.0
+        u_lobe = 0.0 if a < 1.0 and u_strategy >= a else draw(ps, kk, i, bounce_dim(dk, LOBE))  # BSDF only
         wiw, wt, pdf, pbs, dlt, strategy, ratio = sample_mixture(
             mat_type, mat_param, m, gs, slot, a, wo, s, tt, ng, draw(ps, kk, i, bounce_dim(dk, DIR)),
-            draw(ps, kk, i, bounce_dim(dk, DIR + 1)), draw(ps, kk, i, bounce_dim(dk, LOBE)), u_strategy)
+            draw(ps, kk, i, bounce_dim(dk, DIR + 1)), u_lobe, u_strategy)
         gn = gain[i] * ratio  # product of p_bsdf / p_mixture along the path (1 without a guide)
         nb = (b[0] * wt[0], b[1] * wt[1], b[2] * wt[2])
         bmax = max(nb[0], max(nb[1], nb[2]))

@@ -100,19 +100,23 @@ def next_event(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot,
     unit direction, tmax, contribution beta f le w / p_light): the shadow ray to trace, and what it
     adds if unblocked. ok is False where nothing is to be traced."""
     wl, dist, le, pl, lt_tri = sample_light(lt, tri, x, u_light, u_pos0, u_pos1)
-    if not (pl > 0.0 and (le[0] > 0.0 or le[1] > 0.0 or le[2] > 0.0)):
-        return False, x, wl, 0.0, BLACK
-    wil = to_local(wl, s, t, ng)
-    f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wil, True)
-    if not (f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0):
-        return False, x, wl, 0.0, BLACK
-    pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wil), wl)
-    w = power_heuristic(pl, pb)
-    so, sd, tmax = shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps)
-    if not tmax > 0.0:
-        return False, x, wl, 0.0, BLACK
-    return True, so, sd, tmax, (beta[0] * f[0] * le[0] * w / pl, beta[1] * f[1] * le[1] * w / pl,
-                                beta[2] * f[2] * le[2] * w / pl)
+    ok = False
+    so = x
+    sd = wl
+    tmax = 0.0
+    contrib = BLACK
+    if pl > 0.0 and (le[0] > 0.0 or le[1] > 0.0 or le[2] > 0.0):
+        wil = to_local(wl, s, t, ng)
+        f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wil, True)
+        if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
+            pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wil), wl)
+            w = power_heuristic(pl, pb)
+            so, sd, tmax = shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps)
+            if tmax > 0.0:
+                ok = True
+                contrib = (beta[0] * f[0] * le[0] * w / pl, beta[1] * f[1] * le[1] * w / pl,
+                           beta[2] * f[2] * le[2] * w / pl)
+    return ok, so, sd, tmax, contrib
 
 
 @jit(inline="always")
