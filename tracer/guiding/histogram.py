@@ -20,8 +20,7 @@ Both follow Algorithm 1 of Zhu et al. 2021 (Photon-Driven Neural Reconstruction 
   weight f |cos| / the mixture's pdf (so the power maps' expectation does not change).
 - `grid`: each camera vertex adds radiance |cos| / pdf along its sampled direction, cos to its
   facing normal (the estimate of the incident radiance times the cosine integrated over the bin:
-  practical path guiding learns the radiance alone; the cosine, which every diffuse vertex on the
-  voxel's side shares, made the frozen maps' equal-spp variance 20-30% lower on cornell and ajar);
+  practical path guiding learns the radiance alone; why: docs/guiding.md);
   the maps are rebuilt from every iteration's vertices alone.
 
 Splitting and the weight window (`split`, `window`, `window_low`; on for `photon` by default): the
@@ -39,10 +38,8 @@ Sides of surfaces (`normal_classes` 6, the default): a cell holds six trees, one
 normal on the side of the surface that a camera path or photon arrives on (its dominant axis and
 sign). A voxel's map then holds only the light that reaches surfaces facing one way: a wall's map
 no longer holds the light on the floor beside it, nor, for a thin wall, the light on its other
-side, both of which lie behind the wall and send guided samples where the BSDF is zero. On `ajar`
-(photon, maps trained on 128 spp, 64 spp frozen, 3 seeds) 18% of guided directions were below
-the surface with one class, 1% with six; relMSE fell from 0.236 to 0.122 (bsdf: 0.38); on
-`cornell` from 1.45e-3 to 1.19e-3 (bsdf: 2.75e-3). `normal_classes` 1 is the paper's one map per voxel.
+side, both of which lie behind the wall and send guided samples where the BSDF is zero.
+`normal_classes` 1 is the paper's one map per voxel.
 
 The schedule is Algorithm 1 (tracer/guiding/schedule.py); this module learns. Mixing weights
 (the probability a of BSDF sampling, per voxel) start at 0.5 and stay in [alpha_min, alpha_max]:
@@ -52,8 +49,7 @@ The schedule is Algorithm 1 (tracer/guiding/schedule.py); this module learns. Mi
   the one of N_ALPHA evenly spaced candidates whose one-sample estimate F / p_a has the least
   second moment, estimated from those vertices (see _mix_moments). Eq. 14 looks at means only: where
   a map misses light, BSDF-sampled directions carry weights up to 1/a, and along a path these
-  multiply into heavy tails (on `ajar` its one-sample relative variance ranged over 10x between
-  seeds; with `variance` it was stable and below bsdf's: README, "Path guiding").
+  multiply into heavy tails (docs/guiding.md).
 """
 import math
 import time
@@ -410,19 +406,7 @@ class PhotonGuide(HistogramGuide):
     """`--guide photon`: maps from photon power binned by arrival direction (eq. 10)."""
 
     name = "photon"
-    # c = 4000 rather than the paper's 500: at 256 x 256 and 2^t x 1 photon per pixel, c = 500 makes
-    # ~5000 voxels on the Cornell box, each with a handful of photons; 4000 gives ~500, maps as good
-    # (equal-spp relMSE on ajar/cornell), and guided passes and updates several times cheaper.
-    # 2 photons per pixel and sigma 1.0 (rather than 1 and 1.5): on ajar the frozen maps' equal-spp
-    # relative variance went from 0.41x to 0.35x bsdf's (6 seeds) and equal-time relMSE at 40 and
-    # 80 s from 0.48x to 0.44-0.45x; cornell unchanged (0.83x / 0.79x at 10 / 80 s).
-    # light_guiding 0 (off): see trace_photons; on ajar 0.5 made the frozen maps 8% better, but the
-    # longer photon paths cost more than that at equal time (80 s: 0.47x against 0.45x).
-    # resolution 16, not 24: with 24, ajar's frozen maps after all 5 iterations were better (relative
-    # variance 0.22x bsdf's against 0.26x; caustic 0.36x against 0.61x), but after 3 iterations (what
-    # a 10 s budget trains) they were far worse (0.89x against 0.33x: the median map held 283
-    # photons), and at equal time ajar went 0.59 / 0.51 / 0.45 / 0.43x -> 0.81 / 0.75 / 0.43 / 0.40x
-    # at 10 / 20 / 40 / 80 s. A per-map blur widened where photons are few did not rescue it.
+    # why each default: docs/guiding.md, "Defaults and where they were measured"
     DEFAULTS = dict(COMMON, split_c=4000.0, sigma=1.0, photons_per_pixel=2.0, light_guiding=0.0, split=2.0, window=3.0,
                     window_low=0.05)
 
