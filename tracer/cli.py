@@ -33,6 +33,13 @@ def _parser():
     p.add_argument("--guide-opt", action="append", default=[], metavar="KEY=VALUE",
                    help="a setting of the guide, repeatable (e.g. --guide-opt iterations=6); "
                         "an unknown key is an error that lists the valid ones")
+    p.add_argument("--integrator", default="path",
+                   help="path (default) or gpt: gradient-domain path tracing, reconstructed by --recon")
+    p.add_argument("--shift", default="replay", help="gpt: the shift mapping of offset paths: replay (default)")
+    p.add_argument("--recon", default="l1", help="gpt: screened Poisson reconstruction l1 (default), l2, or none "
+                                                 "(the base image)")
+    p.add_argument("--recon-alpha", type=float, default=0.2, metavar="A",
+                   help="gpt: weight of the base image in the reconstruction (default 0.2)")
     budget = p.add_mutually_exclusive_group()
     budget.add_argument("--spp", type=int, help="samples per pixel (default: the scene's render.spp)")
     budget.add_argument("--time", type=float, help="wall-clock budget in seconds instead of --spp")
@@ -89,18 +96,19 @@ def _check_numbers(args):
         raise TracerError(f"--exposure must be a finite number of stops, got {args.exposure}")
 
 
-def _output_paths(out, variance):
+def _output_paths(out, variance, gradients=False):
     base = os.path.splitext(out)[0]
-    return [out, base + ".png", base + ".aovs.exr", base + ".json"] + ([base + ".variance.exr"] if variance else [])
+    return [out, base + ".png", base + ".aovs.exr", base + ".json"] + ([base + ".variance.exr"] if variance else []) + \
+        ([base + s for s in (".base.exr", ".dx.exr", ".dy.exr")] if gradients else [])
 
 
-def _check_output(out, variance):
+def _check_output(out, variance, gradients=False):
     """Fail now, not after the render, if the outputs cannot be written: probe the folder (or,
     if it does not exist yet, the nearest folder above it, where it will be created) by creating
     and removing a file there; os.access says yes to root even where creating a file fails."""
     if not out.lower().endswith(".exr"):
         raise TracerError(f"{out}: output must be an .exr file (a PNG and a JSON are written beside it)")
-    for path in _output_paths(out, variance):
+    for path in _output_paths(out, variance, gradients):
         if os.path.isdir(path):
             raise TracerError(f"{path}: cannot write output, a folder of that name exists")
     folder = os.path.dirname(os.path.abspath(out))
@@ -212,7 +220,7 @@ def _run(argv, warnings):
     crop = _crop(args.crop)
     overrides = {k: getattr(args, k) for k in ("width", "height") if getattr(args, k) is not None}
     out = args.output or os.path.splitext(os.path.basename(args.scene))[0] + ".exr"
-    out_dir = _check_output(out, args.variance)
+    out_dir = _check_output(out, args.variance, args.integrator == "gpt")
     ref = _read_reference(args.reference) if args.reference else None
 
     from .bvh import ACCELS
@@ -223,6 +231,14 @@ def _run(argv, warnings):
         raise unknown_name("accel", args.accel, ACCELS)
     guide_settings = _guide_opts(args.guide_opt)
     make_guide(args.guide, **guide_settings)  # unknown names and settings fail here, before the scene loads
+    from . import gradient
+
+    if args.integrator not in gradient.INTEGRATORS:
+        raise unknown_name("integrator", args.integrator, gradient.INTEGRATORS)
+    if args.integrator == "gpt":
+        gradient.check_settings(args.shift, args.recon, args.recon_alpha)
+        if args.guide != "bsdf":
+            raise TracerError(f"--integrator gpt samples the BSDF only; --guide {args.guide} goes with --integrator path")
     scene = load_scene(args.scene, **overrides)
     crop = _check_crop(crop, scene.width, scene.height) if crop is not None else None
     if ref is not None:
@@ -244,7 +260,8 @@ def _run(argv, warnings):
                     max_depth=args.max_depth,
                     rr_depth=args.rr_depth, seed=args.seed, accel=args.accel, threads=args.threads,
                     pixel_filter=args.filter, crop=crop,
-                    wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet)
+                    wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet, integrator=args.integrator,
+                    shift=args.shift, recon=args.recon, recon_alpha=args.recon_alpha)
     if ref is not None:
         result.stats["metrics"] = metrics.all_metrics(result.image, ref)
     exr, png, js = write_outputs(result, out, exposure=args.exposure, variance=args.variance)

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from . import gradient
 from .bvh import make_accel
 from .bvh.numba_bvh import _NumbaThreads
 from .context import RenderContext
@@ -47,6 +48,7 @@ class RenderResult:
     aovs: dict
     stats: dict
     film: Film = field(repr=False)
+    buffers: dict = field(default_factory=dict, repr=False)  # integrator gpt: base, dx, dy, ... (see render())
 
     def __repr__(self):
         s = self.stats
@@ -75,7 +77,8 @@ def _int_setting(name, value, lo):
 
 def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=None, seed=None,
            accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
-           guide_settings=None, pixel_filter="box", crop=None):
+           guide_settings=None, pixel_filter="box", crop=None, integrator="path", shift="replay", recon="l1",
+           recon_alpha=0.2):
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
     spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
@@ -91,6 +94,11 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                for per-pixel regression tests and debugging)
     crop       (x0, y0, w, h): render only that window of the image (its pixels are the same
                samples as in the full render)
+    integrator "path" (unidirectional path tracing) or "gpt" (gradient-domain path tracing,
+               tracer.gradient: bsdf sampling only): shift "replay"; recon "l1", "l2" or "none"
+               (the base image), with weight recon_alpha on the base. The result's image is then
+               the reconstruction, its variance the base image's, and result.buffers holds base,
+               dx, dy (with variances), direct and indirect; stats time the passes and the solve.
 
     The method runs its own schedule of passes (guide.schedule(session), tracer.session): BSDF
     sampling and guides that learn nothing render final passes alone; `grid` and `photon` run
@@ -119,7 +127,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     n_threads = min(threads or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS)
     with _NumbaThreads(n_threads):  # every kernel of this render on n_threads, restored after
         return _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress,
-                       callback, guide_settings, pixel_filter, crop)
+                       callback, guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha)
 
 
 def _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop):
@@ -151,8 +159,14 @@ def make_context(scene, accel="embree", seed=None, max_depth=None, rr_depth=None
 
 
 def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress, callback,
-            guide_settings, pixel_filter, crop):
+            guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha):
     """render() on n_threads Numba threads."""
+    if integrator not in gradient.INTEGRATORS:
+        raise unknown_name("integrator", integrator, gradient.INTEGRATORS)
+    if integrator == "gpt":
+        shift, recon, recon_alpha = gradient.check_settings(shift, recon, recon_alpha)
+        if not (isinstance(guide, str) and guide == "bsdf"):
+            raise SettingsError(f"integrator gpt samples the BSDF only; a guide ({guide!r}) goes with integrator path")
     rs = scene.render
     max_depth, rr_depth, seed, crop = _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop)
     wave_size = _int_setting("wave_size", wave_size, 1)
@@ -198,7 +212,9 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
                    if time is None else "{desc}: {n:.0f} spp [{elapsed}, budget %gs]" % time)
     settings = {"accel": acc.name, "threads": int(n_threads), "seed": int(seed), "max_depth": int(max_depth),
                 "rr_depth": int(rr_depth), "guide": guide, "pixel_filter": pixel_filter, "crop": list(crop),
-                "wave_size": int(wave_size), **provenance()}
+                "wave_size": int(wave_size), "integrator": integrator, **provenance()}
+    if integrator == "gpt":
+        settings.update(shift=shift, recon=recon, recon_alpha=recon_alpha)
 
     def snapshot():
         return _stats(scene, stats, session.passes, session.sample0, t_setup, t_render, settings, t_compile, g)
@@ -208,9 +224,14 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
                       lambda: sigint.requested)
     interrupted = False
     t_render = _time.perf_counter()
+    gfilms = gradient.GradientFilms(crop[2], crop[3]) if integrator == "gpt" else None
     try:
         sigint.install()
-        if g is None:
+        if gfilms is not None:
+            reserve = gradient.solve_time_estimate(recon, crop[2], crop[3], recon_alpha) if time is not None else 0.0
+            gradient.gradient_passes(ctx, buf, stats, gfilms, session.passes, spp=spp, time=time, t_start=t_start,
+                                     reserve=reserve, before_wave=session._before_wave)
+        elif g is None:
             session.final_passes()
         else:
             g.schedule(session)
@@ -223,6 +244,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
             bar.n = stats.samples / npix  # what it showed, to the last wave, as stats["spp_mean"]
             bar.refresh()
             bar.close()
+    if gfilms is not None:
+        return _gpt_result(gfilms, stats, snapshot, session, interrupted, recon, recon_alpha)
     st = snapshot()
     st["interrupted"] = interrupted
     films = session.films or [(session.final, "final")]
@@ -234,6 +257,18 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         aov_film.count += f.count
         aov_film.aov += f.aov
     return RenderResult(image.astype(np.float32), variance.astype(np.float32), aov_film.aovs(), st, session.final)
+
+
+def _gpt_result(gfilms, stats, snapshot, session, interrupted, recon, alpha):
+    """The RenderResult of a gradient-domain render: the reconstruction, and the buffers."""
+    stats.samples = int(gfilms.base.count.sum())  # base samples (each traced five paths and five first hits)
+    session.sample0 = sum(p["spp"] for p in session.passes)
+    image, buffers, t_solve = gradient.solve(gfilms, recon, alpha)
+    st = snapshot()
+    st["interrupted"] = interrupted
+    st["time_solve"] = t_solve  # included in time_total
+    return RenderResult(image.astype(np.float32), buffers["base_variance"], gfilms.base.aovs(), st, gfilms.base,
+                        buffers)
 
 
 class _Sigint:
@@ -297,8 +332,9 @@ def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile, gu
 
 def write_outputs(result, path, exposure=0.0, variance=False):
     """Write `path` (EXR, RGB, linear), a PNG preview, `<name>.aovs.exr` (albedo, normal, depth),
-    with `variance` `<name>.variance.exr` (result.variance, the variance of each pixel's mean), and
-    a stats JSON beside it; returns the paths of the EXR, the PNG and the JSON.
+    with `variance` `<name>.variance.exr` (result.variance, the variance of each pixel's mean), for
+    a gradient-domain render `<name>.base.exr`, `.dx.exr`, `.dy.exr`, and a stats JSON beside it;
+    returns the paths of the EXR, the PNG and the JSON.
 
     The PNG is imageio.tonemap(image, exposure): automatic exposure (log-average luminance to
     middle grey) plus `exposure` stops, the ACES filmic curve, sRGB; the JSON records the stops applied
@@ -316,6 +352,9 @@ def write_outputs(result, path, exposure=0.0, variance=False):
                 channel_names=("albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z"))
     if variance:
         write_image(base + ".variance.exr", result.variance)
+    for name in ("base", "dx", "dy"):  # integrator gpt: the buffers the reconstruction came from
+        if name in result.buffers:
+            write_image(f"{base}.{name}.exr", result.buffers[name])
     js = base + ".json"
     stats = dict(result.stats, preview_exposure=float(exposure) + math.log2(auto_exposure(result.image)))
     text = json.dumps(stats, indent=1)

@@ -1,0 +1,50 @@
+"""Gradient-domain path tracing (`render(..., integrator="gpt")`): a base image and its
+horizontal and vertical gradients from correlated offset paths (replay.py), reconstructed by
+screened Poisson (poisson.py)."""
+import time as _time
+
+import numpy as np
+
+from ..errors import SettingsError, unknown_name
+from . import poisson
+from .replay import GradientFilms, gradient_passes  # noqa: F401
+
+SHIFTS = ("replay",)
+INTEGRATORS = ("path", "gpt")
+
+
+def check_settings(shift, recon, alpha):
+    """(shift, recon, alpha) checked: one clear error for each bad value."""
+    if shift not in SHIFTS:
+        raise unknown_name("shift", shift, SHIFTS)
+    if recon not in poisson.RECONSTRUCTIONS:
+        raise unknown_name("reconstruction", recon, poisson.RECONSTRUCTIONS)
+    if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not (np.isfinite(alpha) and alpha > 0):
+        raise SettingsError(f"recon_alpha must be a positive number, got {alpha!r}")
+    return shift, recon, float(alpha)
+
+
+def solve_time_estimate(recon, width, height, alpha):
+    """Seconds a `recon` solve of a width x height RGB image will take: a 64 x 64 solve timed here,
+    scaled by the pixel count (the solvers are O(N log N) per iteration)."""
+    if recon == "none":
+        return 0.0
+    z = np.zeros((64, 64, 3))
+    t0 = _time.perf_counter()
+    poisson.reconstruct(recon, z, z, z, alpha)
+    return (_time.perf_counter() - t0) * (width * height) / (64 * 64)
+
+
+def solve(films, recon, alpha):
+    """Reconstruct from GradientFilms: (image (H,W,3) float64, the reconstruction of the indirect
+    light plus the direct buffer; buffers {name: (H,W,3) float32}; seconds the solve took)."""
+    t0 = _time.perf_counter()
+    indirect, dx, dy = films.indirect.mean(), films.dx.mean(), films.dy.mean()
+    image = poisson.reconstruct(recon, indirect, dx, dy, alpha) + films.direct.mean()
+    t_solve = _time.perf_counter() - t0
+    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
+    buffers = {"base": f32(films.base.mean()), "base_variance": f32(films.base.variance()),
+               "dx": f32(dx), "dx_variance": f32(films.dx.variance()), "dy": f32(dy),
+               "dy_variance": f32(films.dy.variance()), "direct": f32(films.direct.mean()),
+               "indirect": f32(indirect)}
+    return image, buffers, t_solve

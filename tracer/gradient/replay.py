@@ -1,0 +1,122 @@
+"""Gradient-domain path tracing with the random-replay shift: base image, dx, dy, direct buffer.
+
+Every sample of pixel p = (x, y) is a base path and four offset paths, one per neighbour
+(x +- 1, y +- 1): the offset path is traced from the neighbouring pixel with the base path's key
+and its position inside the pixel (sources.CameraSource(shift=...)), so it draws the same random
+numbers in every dimension (the counter-based stream makes the replay exact) and has the same
+density in primary sample space: no Jacobian. Its difference from the base path estimates the
+difference of the two pixels' values, I(p + e) - I(p), with little variance where the two paths
+see the same light.
+
+Each pixel pair gets two estimates per sample, one from each side (the +x offset of p and the -x
+offset of p + e), weighted 1/2 each: with replay the offset and base densities are equal, so this
+is the balance heuristic of the two directions. The light seen directly from the camera (depth 0
+emission, from a second trace of the same camera rays at max_depth 1) goes to its own buffer and
+is left out of the base and the gradients the solver sees; it is added back after the solve.
+"""
+import copy
+import time as _time
+
+import numpy as np
+
+from ..film import Film
+from ..integrator import trace_wave
+from ..sources import CameraSource
+
+OFFSETS = ((1, 0), (-1, 0), (0, 1), (0, -1))
+
+
+class _Capture:
+    """A sink that keeps the samples of the last wave: pix (n,), L (n, 3), aov (n, N_AOV)."""
+
+    def add(self, pixel, radiance, aov, weight=None):
+        self.pix = pixel.copy()
+        self.L = radiance.copy()
+        self.aov = aov.copy()
+
+
+class GradientFilms:
+    """Per-pixel accumulators of a gradient-domain render (each a film.Film of the crop): base (the
+    path-traced image, direct light included), indirect (base less the direct light), direct, dx and
+    dy (of the indirect part: dx at (x, y) estimates I(x + 1, y) - I(x, y), 2 samples per spp where
+    both sides are inside the film)."""
+
+    NAMES = ("base", "indirect", "direct", "dx", "dy")
+
+    def __init__(self, width, height):
+        for name in self.NAMES:
+            setattr(self, name, Film(width, height))
+
+
+def trace_gradient_wave(ctx, ctx_direct, buf, films, sample0, g0, n, stats):
+    """Trace paths g0 .. g0+n-1 of a pass (base and its four offsets, each also at max_depth 1 for
+    the direct light) and add them to `films` (GradientFilms)."""
+    cw = int(ctx.crop[2])
+    cap, cap_d = _Capture(), _Capture()
+    trace_wave(ctx, buf, _CAMERA, cap, sample0, g0, n, stats)
+    trace_wave(ctx_direct, buf, _CAMERA, cap_d, sample0, g0, n, stats)
+    pix, aov = cap.pix, cap.aov
+    base = cap.L - cap_d.L
+    films.base.add(pix, cap.L, aov)
+    films.direct.add(pix, cap_d.L, aov)
+    films.indirect.add(pix, base, aov)
+    px, py = pix % cw, pix // cw
+    for (dx, dy), src in zip(OFFSETS, _SHIFTED):
+        trace_wave(ctx, buf, src, cap, sample0, g0, n, stats)
+        trace_wave(ctx_direct, buf, src, cap_d, sample0, g0, n, stats)
+        d = (cap.L - cap_d.L) - base  # offset minus base: I(p + e) - I(p) for e = (dx, dy)
+        if dx == 1:
+            films.dx.add(pix, d, aov)
+        elif dx == -1:
+            keep = px >= 1  # the gradient between p - 1 and p, stored at p - 1
+            films.dx.add(pix[keep] - 1, -d[keep], aov[keep])
+        elif dy == 1:
+            films.dy.add(pix, d, aov)
+        else:
+            keep = py >= 1
+            films.dy.add(pix[keep] - cw, -d[keep], aov[keep])
+
+
+_CAMERA = CameraSource()
+_SHIFTED = tuple(CameraSource(shift=o) for o in OFFSETS)
+
+
+def direct_context(ctx):
+    """A copy of ctx that traces camera rays to their first hit only (max_depth 1: the emission
+    seen directly)."""
+    c = copy.copy(ctx)
+    c.max_depth = 1
+    return c
+
+
+def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, t_start=None, reserve=0.0,
+                    before_wave=None):
+    """Render passes of 1, 2, 4, ... spp into `films` (GradientFilms) until `spp` in all, or, with
+    a time budget, while the next pass fits in `time - reserve` seconds after t_start; appends
+    {spp, time, kind} to `passes` after each. before_wave(n) is called before each wave (it may
+    raise to stop: the films keep every finished wave)."""
+    ctx_d = direct_context(ctx)
+    done = 0
+    pass_spp = 1
+    npix = ctx.n_pixels
+    while True:
+        if time is None:
+            if done >= spp:
+                break
+            pass_spp = min(pass_spp, spp - done)
+        elif passes:
+            per_spp = sum(p["time"] for p in passes) / sum(p["spp"] for p in passes)
+            left = time - reserve - (_time.perf_counter() - t_start)
+            pass_spp = min(pass_spp, int(left / per_spp))
+            if pass_spp < 1:
+                break
+        tp = _time.perf_counter()
+        total = pass_spp * npix
+        for g0 in range(0, total, buf.size):
+            m = min(buf.size, total - g0)
+            if before_wave is not None:
+                before_wave(m)
+            trace_gradient_wave(ctx, ctx_d, buf, films, done, g0, m, stats)
+        passes.append({"spp": pass_spp, "time": _time.perf_counter() - tp, "kind": "gradient"})
+        done += pass_spp
+        pass_spp *= 2
