@@ -17,6 +17,8 @@ from tracer.render import make_context
 from tracer.rng import BLOCK, BOUNCE, DIR, path_key, pss_dims, uniform_batch
 from tracer.session import trace_source
 from tracer.sources import CameraSource, PrimarySampleSource, ProbeSource
+from tracer.splitting import throughput_plan
+from tracer.wave import WaveBuffers
 
 from . import scenes
 from .stats import assert_clean, assert_z
@@ -30,11 +32,34 @@ def box(tmp_path_factory):
     return tracer.load_scene(scenes.closed_box(tmp_path_factory.mktemp("box"), A, LE, width=W, height=H))
 
 
+WAVE = 97  # paths per wave in these tests: every pass spans several waves, the last one partial
+
+
 def _film_of(ctx, source, spp=1):
     film = Film(W, H)
-    st = trace_source(ctx, source, film, spp)
+    st = trace_source(ctx, source, film, spp, buf=WaveBuffers(WAVE))
     assert st.nonfinite == 0
     return film
+
+
+def _samples_of(ctx, source, spp=1):
+    sink = SampleSink()
+    st = trace_source(ctx, source, sink, spp, buf=WaveBuffers(WAVE))
+    assert st.nonfinite == 0
+    return sink.samples()
+
+
+def _probe_rays(ctx, pixels, jx, jy, seed, shift=(0, 0)):
+    """Camera rays through (x + shift, y + shift) at (jx, jy) inside the pixel, with the keys of
+    film pixels `pixels` at sample 0 (the rays from camera_ray, the keys from rng.path_key)."""
+    o = np.empty((len(pixels), 3))
+    d = np.empty((len(pixels), 3))
+    keys = np.empty(len(pixels), np.uint64)
+    for j, p in enumerate(pixels):
+        px, py = p % W, p // W
+        o[j], d[j] = camera_ray(ctx.cam, W, H, px + shift[0], py + shift[1], jx, jy)
+        keys[j] = path_key(seed, py * W + px, 0)
+    return ProbeSource(o, d, keys)
 
 
 def _stream(ctx, dims, spp=1):
@@ -46,9 +71,10 @@ def _stream(ctx, dims, spp=1):
 
 def test_external_samples_equal_to_the_stream_replay_the_camera_exactly(box):
     """PrimarySampleSource fed the stream's own values of pss_dims(2) renders the camera's image
-    bit for bit. Detects a seam that reads the wrong column, the wrong row (path slot), or the
-    wrong dimension for any of the 6 replaced dimensions."""
-    ctx = make_context(box, seed=3, max_depth=-1)
+    bit for bit. Detects a seam that reads the wrong column, the wrong row (path slot: with
+    rr_depth 1 paths die from the first bounce on, so slots and entries differ), the wrong wave
+    offset, or the wrong dimension for any of the 6 replaced dimensions."""
+    ctx = make_context(box, seed=3, max_depth=-1, rr_depth=1)
     dims = pss_dims(2)
     base = _film_of(ctx, CameraSource(), spp=2)
     warped = _film_of(ctx, PrimarySampleSource(_stream(ctx, dims, spp=2), dims), spp=2)
@@ -66,6 +92,22 @@ def test_a_constant_pixel_position_is_the_point_filter(box):
     point = make_context(box, seed=4, max_depth=3, pixel_filter="point")
     src = PrimarySampleSource(np.full((W * H, 2), 0.5), pss_dims(0))
     assert np.array_equal(_film_of(ctx, src).sum, _film_of(point, CameraSource()).sum)
+
+
+def test_a_constant_pixel_position_is_the_ray_through_it(box):
+    """u = (0.25, 0.75): every path of pixel (x, y) starts on the camera ray through (x + 0.25,
+    y + 0.75), which a ProbeSource of those rays with the same keys replays bit for bit (detects
+    swapped or offset pixel dimensions)."""
+    L, Lp = _constant_position(box)
+    np.testing.assert_array_equal(L, Lp)
+
+
+def _constant_position(box):
+    ctx = make_context(box, seed=4, max_depth=3)
+    src = PrimarySampleSource(np.tile([0.25, 0.75], (W * H, 1)), pss_dims(0))
+    _, _, L, _ = _samples_of(ctx, src)
+    _, _, Lp, _ = _samples_of(ctx, _probe_rays(ctx, range(W * H), 0.25, 0.75, 4))
+    return L, Lp
 
 
 def test_a_constant_first_direction_is_shared_by_every_sample_of_a_pixel(box):
@@ -90,32 +132,77 @@ def test_a_constant_first_direction_is_shared_by_every_sample_of_a_pixel(box):
 
 
 def test_weights_multiply_the_samples(box):
-    """A per-path weight w scales that path's value: weights of 2 double the film's sums exactly
-    (detects weights ignored by the sink, or applied twice)."""
+    """Random per-path weights over several waves and 2 spp: the film's count, sum and sum of
+    squares equal those accumulated here with np.add.at from the unweighted samples (detects
+    weights ignored, applied twice, taken from the wrong row or wave, or counted as samples)."""
     ctx = make_context(box, seed=6, max_depth=4)
-    u = _stream(ctx, pss_dims(0))
-    one = _film_of(ctx, PrimarySampleSource(u, pss_dims(0)))
-    two = _film_of(ctx, PrimarySampleSource(u, pss_dims(0), weight=np.full(W * H, 2.0)))
-    np.testing.assert_array_equal(two.sum, 2.0 * one.sum)
+    u = _stream(ctx, pss_dims(0), spp=2)
+    w = np.random.default_rng(7).uniform(0.0, 3.0, size=u.shape[0])
+    pix, _, L, _ = _samples_of(ctx, PrimarySampleSource(u, pss_dims(0)), spp=2)
+    film = _film_of(ctx, PrimarySampleSource(u, pss_dims(0), weight=w), spp=2)
+    count, s, sq = np.zeros(W * H), np.zeros((W * H, 3)), np.zeros((W * H, 3))
+    np.add.at(count, pix, 1.0)
+    np.add.at(s, pix, w[:, None] * L)
+    np.add.at(sq, pix, (w[:, None] * L) ** 2)
+    np.testing.assert_array_equal(film.count, count)
+    np.testing.assert_allclose(film.sum, s, rtol=1e-12)
+    np.testing.assert_allclose(film.sumsq, sq, rtol=1e-12)
 
 
-def test_whole_image_samples_land_where_their_pixel_position_says(box):
-    """whole_image: dims 0 and 1 place the sample anywhere in the film; its pixel is
-    floor(u0 W) + W floor(u1 H), computed here independently (detects swapped axes or pixels
-    taken from the path index)."""
-    ctx = make_context(box, seed=7, max_depth=2)
+@pytest.mark.parametrize("pixel_filter", ["box", "point"])
+def test_whole_image_samples_land_where_their_pixel_position_says(box, pixel_filter):
+    """whole_image: dims 0 and 1 place the sample anywhere in the film (here a crop window); its
+    film pixel is floor(u0 w) + w floor(u1 h), computed here independently, with either pixel
+    filter (detects swapped axes, the crop's offset, or pixels taken from the path index)."""
+    x0, y0, cw, ch = 3, 5, 9, 7
+    ctx = make_context(box, seed=7, max_depth=2, crop=(x0, y0, cw, ch), pixel_filter=pixel_filter)
     u = np.random.default_rng(1).random((3000, 2))
-    sink = SampleSink()
-    trace_source(ctx, PrimarySampleSource(u, pss_dims(0), whole_image=True), sink)
-    pix, w, L, _ = sink.samples()
-    np.testing.assert_array_equal(pix, np.floor(u[:, 0] * W).astype(int) + W * np.floor(u[:, 1] * H).astype(int))
+    pix, w, L, _ = _samples_of(ctx, PrimarySampleSource(u, pss_dims(0), whole_image=True))
+    np.testing.assert_array_equal(pix, np.floor(u[:, 0] * cw).astype(int) + cw * np.floor(u[:, 1] * ch).astype(int))
     assert (w == 1.0).all() and (L > 0).all()
 
 
+def test_a_warp_of_the_image_plane_weighted_by_its_density_is_unbiased(box):
+    """Samples placed over the whole image with density 2 u0 along x (u0 = sqrt(U)), weighted by
+    1 / (2 u0): each pixel's estimate (P / N) sum of weight x value is Le / (1 - a) (z-test of the
+    image mean; normalising by the samples that landed instead, pixels on the left, with few
+    heavy samples, would read ~3x too much: |z| > 100)."""
+    ctx = make_context(box, seed=8, max_depth=-1)
+    rng = np.random.default_rng(3)
+    n = 64 * W * H
+    u = np.stack([np.sqrt(rng.random(n)), rng.random(n)], axis=1)
+    film = _film_of(ctx, PrimarySampleSource(u, pss_dims(0), weight=1.0 / (2.0 * u[:, 0]), whole_image=True))
+    assert (film.count == n).all()
+    img = film.mean().mean(axis=2).ravel()
+    var = film.variance().mean(axis=2).ravel()
+    assert_z(img.mean(), var.sum() / img.size ** 2, LE / (1 - A), what="warped image mean")
+
+
+def test_split_copies_read_the_stream_and_stay_unbiased(tmp_path):
+    """Throughput splitting in a pass with external samples of the first two bounces, in a box of
+    albedo 0.96 (Russian roulette continues with 0.95, so beta grows to 0.96 / 0.95 > 1 and paths
+    split): copies are made, and the image mean is Le / (1 - a) = 25 (z-test; copies reading past
+    the external rows would crash or bias the image)."""
+    a = 0.96
+    box = tracer.load_scene(scenes.closed_box(tmp_path, a, LE, width=W, height=H))
+    ctx = make_context(box, seed=9, max_depth=-1, rr_depth=1)
+    spp = 16
+    u = _stream(ctx, pss_dims(2), spp=spp)[::-1].copy()
+    film = Film(W, H)
+    st = trace_source(ctx, PrimarySampleSource(u, pss_dims(2)), film, spp, buf=WaveBuffers(1000, split=True),
+                      split=throughput_plan(1.0))
+    assert st.split_copies > 0 and st.nonfinite == 0
+    img = film.mean().mean(axis=2).ravel()
+    var = film.variance().mean(axis=2).ravel()
+    assert_z(img.mean(), var.sum() / img.size ** 2, LE / (1 - a), what="split image mean")
+
+
 def test_probe_rays_return_the_radiance_along_them(box):
-    """Probe rays from inside the closed box in random directions: the mean radiance is Le / (1 - a)
-    (z-test on the samples' variance; detects a source that drops emission at the first hit, or
-    keys shared between rays: a 5% bias at 4000 rays is |z| ~ 10)."""
+    """Probe rays from inside the closed box in random directions, over several waves: the mean
+    radiance is Le / (1 - a) (z-test on the samples' variance; detects a source that drops the
+    emission at the first hit: a 5% bias at 4000 rays is |z| ~ 10), the sink index is the ray's
+    row, and the depth AOV is the distance to the wall along each ray (detects rays taken from the
+    wrong row or wave)."""
     ctx = make_context(box, seed=8, max_depth=-1)
     n = 4000
     rng = np.random.default_rng(2)
@@ -123,9 +210,7 @@ def test_probe_rays_return_the_radiance_along_them(box):
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     o = rng.uniform(-0.5, 0.5, size=(n, 3))
     keys = np.array([path_key(8, i, 0) for i in range(n)], np.uint64)
-    sink = SampleSink()
-    trace_source(ctx, ProbeSource(o, d, keys), sink)
-    pix, _, L, aov = sink.samples()
+    pix, _, L, aov = _samples_of(ctx, ProbeSource(o, d, keys))
     np.testing.assert_array_equal(pix, np.arange(n))
     lum = L.mean(axis=1)
     assert_z(lum.mean(), lum.var(ddof=1) / n, LE / (1 - A), what="probe radiance")
@@ -140,40 +225,27 @@ def test_probe_rays_through_the_pixel_centres_replay_a_point_filter_render(box):
     give the point-filter image bit for bit (detects a probe source that keys, orders or starts
     paths differently from the camera)."""
     ctx = make_context(box, seed=9, max_depth=-1, pixel_filter="point")
-    o = np.empty((W * H, 3))
-    d = np.empty((W * H, 3))
-    keys = np.empty(W * H, np.uint64)
-    for p in range(W * H):
-        px, py = p % W, p // W
-        ro, rd = camera_ray(ctx.cam, W, H, px, py, 0.5, 0.5)
-        o[p], d[p] = ro, rd
-        keys[p] = path_key(9, py * W + px, 0)
-    sink = SampleSink()
-    trace_source(ctx, ProbeSource(o, d, keys), sink)
-    _, _, L, _ = sink.samples()
+    _, _, L, _ = _samples_of(ctx, _probe_rays(ctx, range(W * H), 0.5, 0.5, 9))
     np.testing.assert_array_equal(L, _film_of(ctx, CameraSource()).sum)
 
 
 def test_a_shifted_camera_replays_the_neighbours_keys(box):
-    """CameraSource(shift=(1, 0)) traces pixel x's key through pixel x + 1: film pixel x of the
-    shifted render is what pixel x+1 gives with pixel x's key, so a shifted render is not the
-    camera's image moved by one pixel (different keys), while its mean is the same (z-test;
-    detects the shift applied to the key instead of the ray: then the shifted image would equal
-    the moved one exactly)."""
-    ctx = make_context(box, seed=10, max_depth=-1)
-    spp = 16
-    base = _film_of(ctx, CameraSource(), spp)
-    shifted = _film_of(ctx, CameraSource(shift=(1, 0)), spp)
-    b = base.mean()[:, 1:]
-    s = shifted.mean()[:, :-1]
-    assert not np.array_equal(b, s)
-    v = shifted.variance()[:, :-1].mean(axis=2)
-    assert_z(s.mean(), v.sum() / v.size ** 2, LE / (1 - A), what="shifted camera mean")
+    """CameraSource(shift=(dx, dy)) traces pixel x's key through pixel x + (dx, dy), and its sample
+    goes to film pixel x: with the point filter it equals, bit for bit, a ProbeSource through the
+    centre of x + (dx, dy) with x's key (detects the shift applied to the key or the film pixel
+    instead of the ray, or in the wrong direction)."""
+    ctx = make_context(box, seed=10, max_depth=-1, pixel_filter="point")
+    for shift in ((1, 0), (0, -1)):
+        pix, _, L, _ = _samples_of(ctx, CameraSource(shift=shift))
+        np.testing.assert_array_equal(pix, np.arange(W * H))
+        _, _, Lp, _ = _samples_of(ctx, _probe_rays(ctx, range(W * H), 0.5, 0.5, 10, shift=shift))
+        np.testing.assert_array_equal(L, Lp)
 
 
 class ToyPixelGuide(Guide):
-    """A per-pixel guide: every pixel's first bounce samples the same map (uniform over the sphere,
-    so half of it below the surface: a wrong map), mixed with the BSDF at a = 0.5."""
+    """A per-pixel guide: the first bounce of every even film pixel samples the same map (uniform
+    over the sphere, so half of it below the surface: a wrong map), mixed with the BSDF at a = 0.5;
+    odd pixels have no map."""
 
     name = "toy-pixel"
 
@@ -184,15 +256,17 @@ class ToyPixelGuide(Guide):
         tabs = build_tables(np.ones((1, self.n_theta, self.n_phi)))
         self._state = empty_state(self.n_theta, self.n_phi)._replace(
             rowcum=tabs.rowcum, dens=tabs.dens, wsum=tabs.wsum, pscale=tabs.pscale,
-            pixel_slot=np.zeros(ctx.n_pixels, np.int32), pixel_alpha=np.full(ctx.n_pixels, 0.5))
+            pixel_slot=np.where(np.arange(ctx.n_pixels) % 2 == 0, 0, -1).astype(np.int32),
+            pixel_alpha=np.full(ctx.n_pixels, 0.5))
 
     def state(self):
         return self._state
 
 
 def test_a_per_pixel_guide_guides_the_first_bounce_only(box):
-    """The toy per-pixel map is drawn from at first hits with probability 1 - a = 0.5 (binomial
-    z-test), never later (detects locate ignoring the pixel or the depth)."""
+    """The toy per-pixel map is drawn from at the first hits of even pixels with probability 1 - a =
+    0.5 (binomial z-test), never at odd pixels, never later (detects locate ignoring the pixel or
+    the depth)."""
     ctx = make_context(box, seed=11, max_depth=-1)
     g = ToyPixelGuide()
     g.prepare(box, ctx)
@@ -201,12 +275,15 @@ def test_a_per_pixel_guide_guides_the_first_bounce_only(box):
     trace_source(ctx, CameraSource(), Film(W, H), 4, observe=got.append)
     rec = got[0]
     used = rec.strategy >= 0
-    first = used & (rec.prev < 0)
+    even = rec.pixel % 2 == 0
+    first = used & (rec.prev < 0) & even
     later = used & (rec.prev >= 0)
     n = int(first.sum())
     frac = float((rec.strategy[first] == 1).mean())
     assert_z(frac, 0.25 / n, 0.5, what="share of guided first bounces")
     assert later.sum() > 0 and (rec.strategy[later] == 0).all()
+    assert (rec.strategy[used & ~even] == 0).all()
+    assert (rec.node[used & (rec.strategy == 1)] == -1).all()  # no voxel is credited with the pixel map
 
 
 def test_a_wrong_per_pixel_map_stays_unbiased(box):

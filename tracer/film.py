@@ -32,14 +32,22 @@ class Film:
     def n_pixels(self):
         return self.width * self.height
 
-    def add(self, pixel, radiance, aov, weight=None):
+    def add(self, pixel, radiance, aov, weight=None, spread=False):
         """Add samples, in order: pixel (n,) int64, radiance (n,3) float64, aov (n, N_AOV) float64,
         weight (n,) float64 or None (1): each sample's value is weight x radiance. The sink
-        interface of tracer.integrator.trace_wave."""
-        if weight is None:
+        interface of tracer.integrator.trace_wave. spread: the samples were placed over the whole
+        image (sources.PrimarySampleSource, whole_image): each counts toward every pixel's sample
+        count, and adds P x its value (and AOVs) to the pixel it landed in, so that a pixel's mean
+        is (P / N) x the sum of the values that landed there. A pixel outside the film is an error."""
+        if spread:
+            w = np.ones(pixel.shape[0]) if weight is None else weight
+            _accumulate_weighted(self.count, self.sum, self.sumsq, self.aov, pixel, radiance, aov,
+                                 w * float(self.n_pixels), float(self.n_pixels), 0.0)
+            self.count += pixel.shape[0]
+        elif weight is None:
             _accumulate(self.count, self.sum, self.sumsq, self.aov, pixel, radiance, aov)
         else:
-            _accumulate_weighted(self.count, self.sum, self.sumsq, self.aov, pixel, radiance, aov, weight)
+            _accumulate_weighted(self.count, self.sum, self.sumsq, self.aov, pixel, radiance, aov, weight, 1.0, 1.0)
 
     def mean(self):
         """(H, W, 3) float64 per-pixel mean (0 where no sample yet)."""
@@ -103,6 +111,8 @@ def _accumulate(count, s, sq, aov, pixel, radiance, aovs):
     # Sequential on purpose: the order of additions into each pixel is the sample order.
     for i in range(pixel.shape[0]):
         p = pixel[i]
+        if p < 0 or p >= count.shape[0]:
+            raise IndexError("a sample's pixel is outside the film")
         count[p] += 1.0
         for c in range(3):
             r = radiance[i, c]
@@ -113,28 +123,31 @@ def _accumulate(count, s, sq, aov, pixel, radiance, aovs):
 
 
 @jit
-def _accumulate_weighted(count, s, sq, aov, pixel, radiance, aovs, weight):
+def _accumulate_weighted(count, s, sq, aov, pixel, radiance, aovs, weight, aov_scale, count_add):
+    """_accumulate with value weight x radiance, AOVs x aov_scale, and count_add per sample."""
     for i in range(pixel.shape[0]):
         p = pixel[i]
-        count[p] += 1.0
+        if p < 0 or p >= count.shape[0]:
+            raise IndexError("a sample's pixel is outside the film")
+        count[p] += count_add
         for c in range(3):
             r = weight[i] * radiance[i, c]
             s[p, c] += r
             sq[p, c] += r * r
         for c in range(aov.shape[1]):
-            aov[p, c] += aovs[i, c]
+            aov[p, c] += aov_scale * aovs[i, c]
 
 
 class SampleSink:
     """A sink that keeps the samples instead of accumulating them: after a render of a source,
     `samples()` gives (index (n,) int64, weight (n,) float64, radiance (n,3) float64, aov (n, N_AOV)
-    float64) in the order they were traced. The index is the source's pixel (film pixel for camera
-    sources, the ray's row for ProbeSource)."""
+    float64) in the order they were traced. The index is the source's sink index (the film pixel
+    for camera sources, the ray's row for ProbeSource); the weights are not multiplied in."""
 
     def __init__(self):
         self._parts = []
 
-    def add(self, pixel, radiance, aov, weight=None):
+    def add(self, pixel, radiance, aov, weight=None, spread=False):
         w = np.ones(pixel.shape[0]) if weight is None else np.array(weight, dtype=np.float64)
         self._parts.append((np.array(pixel), w, np.array(radiance), np.array(aov)))
 

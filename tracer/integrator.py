@@ -206,7 +206,8 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
 def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, direct=True, split=None):
     """Trace paths g0 .. g0+n-1 of `source` (tracer.sources) for the pass that starts at sample
     index sample0, and give the finished samples to `sink` (a Film, or a film.SampleSink):
-    sink.add(pixel, radiance, aov, weight).
+    sink.add(index, radiance, aov, weight[, spread=True]) (see sources: the index is the film pixel,
+    or a probe ray's row).
 
     ctx (render.RenderContext) holds the scene, accel, lights, depths and the guide's state, which
     steers the sampling. observe(records), if given, gets the wave's vertices (guiding.records),
@@ -265,6 +266,9 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
         finalize_records(head.strategy, head.path, head.beta, head.L0, head.radiance, buf.L)
         observe(head)
         t0 = stats.tick("record", t0)
-    sink.add(buf.pix[:n], buf.L[:n], buf.aov[:n], buf.weight[:n] if source.weighted else None)
+    if source.spread:
+        sink.add(buf.index[:n], buf.L[:n], buf.aov[:n], buf.weight[:n] if source.weighted else None, spread=True)
+    else:
+        sink.add(buf.index[:n], buf.L[:n], buf.aov[:n], buf.weight[:n] if source.weighted else None)
     stats.samples += n
     stats.tick("film", t0)

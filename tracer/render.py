@@ -26,6 +26,7 @@ from .context import RenderContext
 from .errors import SettingsError, unknown_name
 from .film import Film, combine_films
 from .guiding import make_guide, warm_up_guides
+from .guiding.base import Guide
 from .integrator import trace_wave
 from .lights import build_lights
 from .provenance import provenance
@@ -176,8 +177,10 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         raise SettingsError(f"time must be a positive number of seconds, got {time!r}")
     if isinstance(guide, str):
         g = make_guide(guide, **(guide_settings or {}))
-    else:  # a guide object (for experiments): anything with the contract's methods
-        g, guide = guide, getattr(guide, "name", type(guide).__name__)
+    else:  # a guide object (for experiments): a tracer.guiding.base.Guide
+        if not isinstance(guide, Guide):
+            raise SettingsError(f"guide must be a name or a tracer.guiding.base.Guide, got {type(guide).__name__}")
+        g, guide = guide, guide.name
         if guide_settings:
             raise SettingsError("guide_settings go with a guide name, not with a guide object")
 

@@ -16,13 +16,13 @@ from .wave import Stats, WaveBuffers
 
 
 def trace_source(ctx, source, sink, spp=1, sample0=0, buf=None, stats=None, observe=None, direct=True, split=None,
-                 before_wave=None):
+                 before_wave=None, after_wave=None):
     """Trace every path of one pass of `source` (tracer.sources) into `sink` (a Film or a
     film.SampleSink), in waves of buf.size paths (buf: a wave.WaveBuffers, made for the pass if
     None). ctx: a RenderContext (render.make_context); spp: the pass's samples per pixel, for
     sources that count by it; sample0: the sample index it starts at. observe, direct, split: as
-    integrator.trace_wave. before_wave(n), if given, is called before each wave of n paths (it may
-    raise to stop). Returns the wave.Stats."""
+    integrator.trace_wave. before_wave(n) and after_wave(n), if given, are called before and after
+    each wave of n paths (they may raise to stop). Returns the wave.Stats."""
     total = source.count(ctx, spp)
     buf = WaveBuffers(max(1, min(total, 1 << 16)), split=split is not None) if buf is None else buf
     stats = Stats() if stats is None else stats
@@ -31,6 +31,8 @@ def trace_source(ctx, source, sink, spp=1, sample0=0, buf=None, stats=None, obse
         if before_wave is not None:
             before_wave(n)
         trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=observe, direct=direct, split=split)
+        if after_wave is not None:
+            after_wave(n)
     return stats
 
 
@@ -88,9 +90,13 @@ class Session:
         tp = _time.perf_counter()
         observe = g.observe if learn else None
         direct = g.learn_direct if g is not None else True
-        trace_source(ctx, source, film, spp, self.sample0, buf, self.stats, observe, direct, split, self._before_wave)
+        trace_source(ctx, source, film, spp, self.sample0, buf, self.stats, observe, direct, split, self._before_wave,
+                     self._after_wave)
         self.sample0 += spp
-        entry = {"spp": spp, "time": _time.perf_counter() - tp, "kind": kind, "film": len(self.films) - 1}
+        index = next((j for j, (f, _) in enumerate(self.films) if f is film), None)
+        if index is None:
+            raise ValueError("run_pass renders into a film opened with new_film (or the final film)")
+        entry = {"spp": spp, "time": _time.perf_counter() - tp, "kind": kind, "film": index}
         if learn:
             tl = _time.perf_counter()
             g.update()
@@ -103,6 +109,8 @@ class Session:
     def _before_wave(self, n):
         if self.interrupted():
             raise KeyboardInterrupt  # between waves: every finished wave is whole in the film
+
+    def _after_wave(self, n):
         if self.bar is not None:
             self.bar.update(n / self.ctx.n_pixels)
 
@@ -110,7 +118,8 @@ class Session:
         """Fill the rest of the budget with final passes into self.final: each twice the last pass's
         spp (the first as many as the last pass, or 1), up to `spp` in all, or, with a time budget,
         while the next one fits in the time left at the final passes' speed so far."""
-        self.films.append((self.final, "final"))
+        if not any(f is self.final for f, _ in self.films):
+            self.films.append((self.final, "final"))
         self.phase("final")
         passes = self.passes
         pass_spp = passes[-1]["spp"] if passes else 1

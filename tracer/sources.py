@@ -13,7 +13,8 @@ seam, tracer.rng.draw). Sources:
     ProbeSource(origins, directions, keys)  given rays with given keys; pixel = the ray's row
 
 A source's `count(spp)` is the number of paths of a pass of spp samples per pixel; `weighted`
-says whether the sink must multiply the weights in.
+says whether the sink must multiply the weights in, `spread` whether every sample counts toward
+every pixel (a warp of the whole image plane).
 """
 import numpy as np
 from numba import prange
@@ -39,8 +40,8 @@ def _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain):
 
 
 @kernel
-def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, whole_image, ps, pix, key, ray_o, ray_d,
-                 beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain):
+def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, whole_image, ps, pix, index, key, ray_o,
+                 ray_d, beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain):
     """Camera rays for global path indices g0 .. g0+n-1 of a pass (sample-major order).
 
     crop = (x0, y0, w, h): the film covers that window of the width x height image; pix[i] is the
@@ -49,8 +50,9 @@ def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, who
     position inside the pixel from dimensions DIM_PIXEL, DIM_PIXEL + 1), False for the point
     filter (the pixel centre). shift = (dx, dy): the ray goes through pixel (x + dx, y + dy) at the
     same position inside it, with the key and film pixel of (x, y). whole_image: the two pixel
-    dimensions place the sample anywhere in the crop window (its film pixel follows), for a warp
-    of the whole image plane; else inside the path's own pixel.
+    dimensions place the sample anywhere in the crop window (its film pixel follows; inside the
+    pixel at its centre with the point filter), for a warp of the whole image plane; else inside
+    the path's own pixel. index[i] = pix[i]: the sink's index is the film pixel.
     """
     n = pix.shape[0]
     cw = crop[2]
@@ -62,19 +64,20 @@ def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, who
         px = crop[0] + p % cw
         py = crop[1] + p // cw
         k = path_key(seed, py * width + px, s)
-        jx = draw(ps, k, i, DIM_PIXEL) if jitter else 0.5
-        jy = draw(ps, k, i, DIM_PIXEL + 1) if jitter else 0.5
+        jx = draw(ps, k, i, DIM_PIXEL) if jitter or whole_image else 0.5
+        jy = draw(ps, k, i, DIM_PIXEL + 1) if jitter or whole_image else 0.5
         if whole_image:
             fx = min(jx * cw, cw - 1e-9)
             fy = min(jy * crop[3], crop[3] - 1e-9)
             qx = int(fx)
             qy = int(fy)
-            jx = fx - qx
-            jy = fy - qy
+            jx = fx - qx if jitter else 0.5
+            jy = fy - qy if jitter else 0.5
             p = qy * cw + qx
             px = crop[0] + qx
             py = crop[1] + qy
         pix[i] = p
+        index[i] = p
         key[i] = k
         o, d = camera_ray(cam, width, height, px + shift[0], py + shift[1], jx, jy)
         for c in range(3):
@@ -84,12 +87,14 @@ def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, who
 
 
 @kernel
-def probe_paths(origins, directions, keys, g0, pix, key, ray_o, ray_d, beta, L, depth, prev_pdf, prev_delta, aov,
-                prev_rec, gain):
-    """Paths from given rays g0 .. g0+n-1: pix[i] = g0 + i (the row), key and ray as given."""
+def probe_paths(origins, directions, keys, g0, pix, index, key, ray_o, ray_d, beta, L, depth, prev_pdf, prev_delta,
+                aov, prev_rec, gain):
+    """Paths from given rays g0 .. g0+n-1: index[i] = g0 + i (the row, for the sink), no film pixel
+    (pix -1: no per-pixel guide map, no weight window), key and ray as given."""
     for i in prange(pix.shape[0]):
         g = g0 + i
-        pix[i] = g
+        pix[i] = -1
+        index[i] = g
         key[i] = keys[g]
         for c in range(3):
             ray_o[i, c] = origins[g, c]
@@ -99,9 +104,11 @@ def probe_paths(origins, directions, keys, g0, pix, key, ray_o, ray_d, beta, L, 
 
 class CameraSource:
     """Camera rays through every pixel of the film (see camera_paths); shift=(dx, dy) sends each
-    ray through the neighbouring pixel with the base pixel's key and film pixel."""
+    ray through the neighbouring pixel with the base pixel's key and film pixel (at the image's
+    border, through a pixel outside the image: the camera extends past it)."""
 
     weighted = False
+    spread = False
 
     def __init__(self, shift=(0, 0)):
         self.shift = np.asarray(shift, dtype=np.int64)
@@ -118,7 +125,8 @@ class CameraSource:
     def start(self, ctx, buf, sample0, g0, n):
         ps = self._primary(g0, n)
         camera_paths(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, ctx.seed, sample0, g0,
-                     self.shift, self._whole_image(), ps, buf.pix[:n], buf.key[:n], buf.ray_o[:n], buf.ray_d[:n],
+                     self.shift, self._whole_image(), ps, buf.pix[:n], buf.index[:n], buf.key[:n], buf.ray_o[:n],
+                     buf.ray_d[:n],
                      buf.beta[:n], buf.L[:n], buf.depth[:n], buf.prev_pdf[:n], buf.prev_delta[:n], buf.aov[:n],
                      buf.prev_rec[:n], buf.gain[:n])
         return ps
@@ -132,10 +140,12 @@ class CameraSource:
 
 class PrimarySampleSource(CameraSource):
     """The camera with external primary samples: u (N, D) in [0, 1) supplies dimensions `dims`
-    (e.g. rng.pss_dims(m)) of paths 0 .. N-1 of the pass, weight (N,) multiplies each path's value
-    (e.g. 1 / the warp's density). whole_image: dims 0 and 1 place the sample anywhere in the film
-    (a warp of the image plane; the film then counts samples where they land), else inside the
-    path's own pixel. A pass renders N paths (count ignores spp)."""
+    (e.g. rng.pss_dims(m)) of paths 0 .. N-1 of the pass, weight (N,) finite and >= 0 multiplies
+    each path's value (e.g. 1 / the warp's density over the supplied dimensions). whole_image: dims
+    0 and 1 place the sample anywhere in the film (a warp of the whole image plane), and the film
+    estimates each pixel as (P / N) x the sum of weight x value of the samples that landed in it
+    (`spread`: every sample counts toward every pixel's sample count); else inside the path's own
+    pixel, each pixel the mean of its own samples. A pass renders N paths (count ignores spp)."""
 
     weighted = True
 
@@ -146,7 +156,10 @@ class PrimarySampleSource(CameraSource):
         self.weight = np.ones(n) if weight is None else np.ascontiguousarray(weight, dtype=np.float64)
         if self.weight.shape != (n,):
             raise ValueError(f"weight must be ({n},), got {self.weight.shape}")
+        if not (np.isfinite(self.weight).all() and (self.weight >= 0.0).all()):
+            raise ValueError("weight must be finite and >= 0 (a sample drawn where the density is 0 cannot be)")
         self.whole_image = bool(whole_image)
+        self.spread = self.whole_image
 
     def count(self, ctx, spp):
         return self._all.u.shape[0]
@@ -158,6 +171,9 @@ class PrimarySampleSource(CameraSource):
         return self.whole_image
 
     def start(self, ctx, buf, sample0, g0, n):
+        if not ctx.jitter and not self.whole_image and (self._all.col[:2] >= 0).any():
+            raise ValueError("the point filter puts every sample at its pixel's centre: supplied pixel dimensions "
+                             "would be ignored while their density is in the weights")
         ps = super().start(ctx, buf, sample0, g0, n)
         buf.weight[:n] = self.weight[g0:g0 + n]
         return ps
@@ -168,10 +184,13 @@ class PrimarySampleSource(CameraSource):
 
 class ProbeSource:
     """Given rays: origins, directions (N, 3) float64 world (unit directions), keys (N,) uint64 (e.g.
-    rng.path_key(seed, i, 0)). Path g starts at ray g; its sample goes to sink index g. The first
-    hit is bounce 0 (what it emits counts in full). A pass renders the N rays (count ignores spp)."""
+    rng.path_key(seed, i, 0)). Path g starts at ray g; its sample goes to sink index g (use a
+    film.SampleSink, or a Film of at least N pixels); it has no film pixel, so per-pixel guide maps
+    and the weight window do not apply. The first hit is bounce 0 (what it emits counts in full).
+    A pass renders the N rays (count ignores spp)."""
 
     weighted = False
+    spread = False
 
     def __init__(self, origins, directions, keys):
         self.origins = np.ascontiguousarray(origins, dtype=np.float64)
@@ -187,7 +206,7 @@ class ProbeSource:
         return self.origins.shape[0]
 
     def start(self, ctx, buf, sample0, g0, n):
-        probe_paths(self.origins, self.directions, self.keys, g0, buf.pix[:n], buf.key[:n], buf.ray_o[:n],
+        probe_paths(self.origins, self.directions, self.keys, g0, buf.pix[:n], buf.index[:n], buf.key[:n], buf.ray_o[:n],
                     buf.ray_d[:n], buf.beta[:n], buf.L[:n], buf.depth[:n], buf.prev_pdf[:n], buf.prev_delta[:n],
                     buf.aov[:n], buf.prev_rec[:n], buf.gain[:n])
         return self._ps

@@ -57,7 +57,7 @@ def _split_count(k, active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, de
         arriving = -(ray_d[k, 0] * ng[0] + ray_d[k, 1] * ng[1] + ray_d[k, 2] * ng[2]) >= 0.0
         nf = ng if arriving else (-ng[0], -ng[1], -ng[2])
         node = find_voxel(gs, x, nf)
-        if node >= 0 and outgoing[node] > 0.0:
+        if node >= 0 and outgoing[node] > 0.0 and pix[i] >= 0:
             q = (0.2126 * beta[i, 0] + 0.7152 * beta[i, 1] + 0.0722 * beta[i, 2]) * outgoing[node] / pixel_est[pix[i]]
             if q > hi:
                 return min(int(math.ceil(q / hi)), SPLIT_MAX)
@@ -255,8 +255,7 @@ class WeightWindow:
                 smooth = sum(padded[1 + dy: 1 + dy + h, 1 + dx: 1 + dx + w]
                              for dy in (-1, 0, 1) for dx in (-1, 0, 1)) / 9.0
                 floor = 0.01 * float(lum.mean())
-                if floor > 0.0:
-                    self.pixel_est = np.maximum(smooth, floor).ravel()
+                self.pixel_est = np.maximum(smooth, floor).ravel() if floor > 0.0 else None
             if self.pixel_est is not None and self.pixel_est.shape[0] == w * h:
                 window = (np.ascontiguousarray(outgoing_est, dtype=np.float64), self.pixel_est)
         if window is None:

@@ -110,7 +110,8 @@ class WaveBuffers:
         self.parent = np.zeros(size if split else 1, np.int64)  # path a copy adds into
         self.ks = np.zeros(size if split else 1, np.int64)  # copies per entry, in a bounce that splits
         z3 = lambda: np.zeros((size, 3))  # noqa: E731
-        self.pix = np.zeros(size, np.int64)
+        self.pix = np.zeros(size, np.int64)  # film pixel of the path (-1: none, e.g. a probe ray)
+        self.index = np.zeros(size, np.int64)  # where the sink puts the path's sample (film pixel, or a probe's row)
         self.key = np.zeros(size, np.uint64)
         self.beta, self.L = z3(), z3()
         self.depth = np.zeros(size, np.int32)

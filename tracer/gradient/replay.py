@@ -29,7 +29,7 @@ OFFSETS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 class _Capture:
     """A sink that keeps the samples of the last wave: pix (n,), L (n, 3), aov (n, N_AOV)."""
 
-    def add(self, pixel, radiance, aov, weight=None):
+    def add(self, pixel, radiance, aov, weight=None, spread=False):
         self.pix = pixel.copy()
         self.L = radiance.copy()
         self.aov = aov.copy()

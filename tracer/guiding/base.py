@@ -55,8 +55,14 @@ class Guide:
         pass
 
     def schedule(self, session):
-        """Run the render's passes: the final passes, with this guide's split plan."""
-        session.final_passes(self.split_plan(session.training_films(), session.ctx.crop))
+        """Run the render's passes: Algorithm 1 (guiding.schedule) for a guide that learns, else the
+        final passes alone, with this guide's split plan."""
+        if self.learns:
+            from .schedule import algorithm1
+
+            algorithm1(session, self)
+        else:
+            session.final_passes(self.split_plan(session.training_films(), session.ctx.crop))
 
     def split_plan(self, films, crop):
         """The SplitPlan of the final passes from the training passes' films, or None."""

@@ -65,7 +65,6 @@ from .base import Guide
 from .directional import bin_of_batch, build_tables
 from .photons import trace_photons
 from .reconstruct import RECONSTRUCTORS, make_reconstructor
-from .schedule import algorithm1
 from .spatial import HierarchicalGrid, empty_state
 
 COMMON = {
@@ -280,9 +279,6 @@ class HistogramGuide(Guide):
         before there is a grid."""
         return outgoing(self.grid) if self.grid is not None else None
 
-    def schedule(self, session):
-        """Algorithm 1: pilot, training iterations, final passes (tracer.guiding.schedule)."""
-        algorithm1(session, self)
 
     def memory_bytes(self):
         return self.grid.memory_bytes() if self.grid is not None else 0

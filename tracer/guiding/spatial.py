@@ -95,15 +95,16 @@ def find_voxel(gs, x, n):
 @jit(inline="always")
 def locate(gs, x, n, pixel, depth):
     """Where the guide keeps the map for a vertex at x (world) with facing normal n, on a path of
-    film pixel `pixel` at bounce `depth` (0: the first hit): (node, slot, a). node is the voxel
-    (leaf, -1 outside the grid), slot the sampling map to draw from (-1: none, sample the BSDF),
-    a the probability of BSDF sampling in the one-sample MIS mixture (1 where slot is -1). A
-    per-pixel map (gs.pixel_slot, e.g. a first-bounce map per pixel) takes precedence at depth 0."""
-    node = find_voxel(gs, x, n)
+    film pixel `pixel` (-1: none) at bounce `depth` (0: the first hit): (node, slot, a). node is
+    the voxel (leaf, -1 outside the grid), slot the sampling map to draw from (-1: none, sample the
+    BSDF), a the probability of BSDF sampling in the one-sample MIS mixture (1 where slot is -1).
+    A per-pixel map (gs.pixel_slot, e.g. a first-bounce map per pixel) takes precedence at depth
+    0; node is then -1, so that the voxel's statistics do not count samples of the pixel's map."""
     if depth == 0 and 0 <= pixel < gs.pixel_slot.shape[0]:
         s = gs.pixel_slot[pixel]
         if s >= 0:
-            return node, s, gs.pixel_alpha[pixel]
+            return -1, s, gs.pixel_alpha[pixel]
+    node = find_voxel(gs, x, n)
     if node >= 0:
         s = gs.slot[node]
         if s >= 0:
