@@ -5,7 +5,9 @@
     python -m bench.convergence --scenes ajar --methods bsdf,photon,photon:mixing=variance
 
 A method is a registered guide name, optionally with settings after a colon
-(`name:key=value,key=value`, as `--guide-opt` takes them), so variants of one guide can be compared.
+(`name:key=value,key=value`, as `--guide-opt` takes them), so variants of one guide can be compared,
+or a gradient-domain method (GRADIENT_METHODS: `gpt-l1`, `gpt-l2`, `gpt-replay-l1`: the
+integrator gpt with that shift and reconstruction; its solve counts in its time).
 
 A scene name is `scenes/<name>/<name>.obj`, or `<scene-dir>/<name>/scene.obj` for external
 scenes; its reference is the one `python -m bench.reference` wrote (scenes/<name>/reference.exr,
@@ -81,15 +83,40 @@ def reference_for(path):
     return load(out)
 
 
+# gradient-domain methods: render() arguments (the default shift is replay until another exists)
+GRADIENT_METHODS = {
+    "gpt-l1": {"integrator": "gpt", "recon": "l1"},
+    "gpt-l2": {"integrator": "gpt", "recon": "l2"},
+    "gpt-replay-l1": {"integrator": "gpt", "shift": "replay", "recon": "l1"},
+}
+
+
 def method_spec(method):
     """'photon' or 'photon:mixing=variance,sigma=2' -> (guide name, settings)."""
     name, _, opts = method.partition(":")
     return name, _guide_opts([o for o in opts.split(",") if o])
 
 
-def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
+def render_args(method):
+    """render() keyword arguments of a method: a gradient-domain one, or a guide with settings."""
+    if method in GRADIENT_METHODS:
+        return dict(GRADIENT_METHODS[method])
     name, settings = method_spec(method)
-    r = tracer.render(scene, spp=spp, time=time_budget, guide=name, guide_settings=settings or None, seed=seed)
+    return {"guide": name, "guide_settings": settings or None}
+
+
+def check_method(method):
+    """Fail before rendering on an unknown method or guide setting."""
+    if method.startswith("gpt") and method not in GRADIENT_METHODS:
+        raise SystemExit(f"bench.convergence: unknown gradient method {method!r}; valid: "
+                         + ", ".join(GRADIENT_METHODS))
+    if method not in GRADIENT_METHODS:
+        name, settings = method_spec(method)
+        make_guide(name, **settings)
+
+
+def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
+    r = tracer.render(scene, spp=spp, time=time_budget, seed=seed, **render_args(method))
     s = r.stats
     image = None
     if images:
@@ -106,6 +133,7 @@ def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
         "time_total": s["time_total"], "time_learning": learning, "update_s": update, "inference_s": inference,
         "time_rendering": s["time_total"] - learning - update - inference,
         "shade_s": s["time_stages"]["shade"],
+        "solve_s": s.get("time_solve", 0.0),
         "guide_memory_bytes": s.get("guide_memory_bytes", 0),
         "settings": {k: s[k] for k in ("max_depth", "rr_depth", "accel", "threads", "pixel_filter")},
         "metrics": metrics.all_metrics(r.image, ref),
@@ -339,8 +367,7 @@ def main(argv=None):
         p.error("--scenes is required (unless --rescore)")
     methods = [m.strip() for m in a.methods.split(";" if ";" in a.methods else ",") if m.strip()]
     for m in methods:  # an unknown guide or setting fails now, not after an hour of runs
-        name, settings = method_spec(m)
-        make_guide(name, **settings)
+        check_method(m)
     if "bsdf" not in methods:
         methods.insert(0, "bsdf")  # every ratio is against bsdf
     times = [float(t) for t in a.time.split(",")]
