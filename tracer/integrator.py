@@ -48,7 +48,7 @@ MAX_BOUNCES = 4096
 @kernel
 def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, lt, gs,
           ps, max_depth, rr_depth,
-          beta, L, depth, prev_pdf, prev_delta, gain, key, pix, aov,
+          beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov,
           alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
           record, rec_base, prev_rec, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0,
           r_beta, r_pb, r_prev):
@@ -57,7 +57,8 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
     Entry k of the hit arrays (t, prim, b1, b2) and of ray_o/ray_d belongs to path slot
     active[k]. surf: the scene's Surfaces (triangles, normals, materials, ray offsets); lt: the
     lights; gs: the guide's GuideState (empty: BSDF sampling); ps: the wave's PrimarySamples.
-    Path state (beta ... aov) is per slot. Writes the continuation ray to next_o/next_d[k] with
+    Path state (beta ... aov) is per slot; L_cam[i] gets the light the camera ray sees directly
+    (the emission at the first hit, or the environment if it escapes). Writes the continuation ray to next_o/next_d[k] with
     alive[k], and a shadow ray (origin, unit direction, tmax, unoccluded contribution) with
     has_shadow[k].
 
@@ -82,12 +83,18 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         wray = (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2])  # direction the path arrived along
         b = (beta[i, 0], beta[i, 1], beta[i, 2])        # throughput up to this vertex
         p = prim[k]
+        if dk == 0:
+            for c in range(3):
+                L_cam[i, c] = 0.0
         if p < 0:
             # Escaped: environment light, MIS-weighted against NEE's choice of it
             if lt.env_type != ENV_NONE:
                 le, w = emitted_env(lt, wray, dk, prev_pdf[i], prev_delta[i])
                 for c in range(3):
                     L[i, c] += b[c] * le[c] * w
+                if dk == 0:
+                    for c in range(3):
+                        L_cam[i, c] = b[c] * le[c] * w
                 if record > 0 and prev_rec[i] >= 0:
                     x_le = -(1.0 - w) if record == 1 else w
                     for c in range(3):
@@ -105,6 +112,9 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             le, w = emitted_surface(lt, p, t[k] * t[k], cos_o, dk, prev_pdf[i], prev_delta[i])
             for c in range(3):
                 L[i, c] += b[c] * le[c] * w
+            if dk == 0:
+                for c in range(3):
+                    L_cam[i, c] = b[c] * le[c] * w
             if record > 0 and prev_rec[i] >= 0:
                 x_le = -(1.0 - w) if record == 1 else w
                 for c in range(3):
@@ -241,7 +251,7 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
         if record > 0 and n_rec + n_active > rec.strategy.shape[0]:
             rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
         shade(active[:n_active], ro, rd, *hits, *ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth,
-              ctx.rr_depth, buf.beta, buf.L, buf.depth, buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.pix,
+              ctx.rr_depth, buf.beta, buf.L, buf.L_cam, buf.depth, buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.pix,
               buf.aov, buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow,
               record, n_rec, buf.prev_rec, **rec.kernel_args())
         t0 = stats.tick("shade", t0)

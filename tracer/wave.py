@@ -114,6 +114,7 @@ class WaveBuffers:
         self.index = np.zeros(size, np.int64)  # where the sink puts the path's sample (film pixel, or a probe's row)
         self.key = np.zeros(size, np.uint64)
         self.beta, self.L = z3(), z3()
+        self.L_cam = z3()  # the light the camera ray sees directly (integrator.shade)
         self.depth = np.zeros(size, np.int32)
         self.prev_pdf = np.zeros(size)
         self.prev_delta = np.zeros(size, np.bool_)

@@ -100,3 +100,20 @@ def test_cli_writes_the_reconstruction_and_the_buffers(tmp_path, capsys):
                  "-o", str(out), "-q"])
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and "BSDF only" in err
+
+
+SHARED = os.path.join(os.path.dirname(ROOT), "shared", "scenes")
+EXTERNAL = ("cornell-glass-sphere", "veach-ajar", "veach-ajar-glossy", "veach-mis")
+
+
+@pytest.mark.parametrize("name", EXTERNAL)
+def test_no_nonfinite_sample_on_the_external_scenes(name):
+    """The public scenes beside the repository (../shared/scenes), 24x24, 2 spp, L1: no non-finite
+    sample, finite buffers (glass, glossy metal, small bright lights)."""
+    path = os.path.join(SHARED, name, "scene.obj")
+    if not os.path.isfile(path):
+        pytest.skip(f"{path} is not there")
+    r = tracer.render(tracer.load_scene(path, width=24, height=24), spp=2, integrator="gpt", seed=2)
+    assert_clean(r)
+    for k, v in r.buffers.items():
+        assert np.isfinite(v).all(), k

@@ -10,11 +10,11 @@ see the same light.
 
 Each pixel pair gets two estimates per sample, one from each side (the +x offset of p and the -x
 offset of p + e), weighted 1/2 each: with replay the offset and base densities are equal, so this
-is the balance heuristic of the two directions. The light seen directly from the camera (depth 0
-emission, from a second trace of the same camera rays at max_depth 1) goes to its own buffer and
-is left out of the base and the gradients the solver sees; it is added back after the solve.
+is the balance heuristic of the two directions. The light seen directly from the camera (what
+the first hit emits, or the environment a camera ray escapes to: the integrator's L_cam) goes to
+its own buffer and is left out of the base and the gradients the solver sees; it is added back
+after the solve.
 """
-import copy
 import time as _time
 
 import numpy as np
@@ -27,12 +27,18 @@ OFFSETS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 
 
 class _Capture:
-    """A sink that keeps the samples of the last wave: pix (n,), L (n, 3), aov (n, N_AOV)."""
+    """A sink that keeps the samples of the last wave: pix (n,), L (n, 3), aov (n, N_AOV), and the
+    wave's light seen directly by the camera (L_cam, read from the buffer)."""
+
+    def __init__(self, buf):
+        self.buf = buf
 
     def add(self, pixel, radiance, aov, weight=None, spread=False):
+        n = pixel.shape[0]
         self.pix = pixel.copy()
         self.L = radiance.copy()
         self.aov = aov.copy()
+        self.L_cam = self.buf.L_cam[:n].copy()
 
 
 class GradientFilms:
@@ -48,23 +54,21 @@ class GradientFilms:
             setattr(self, name, Film(width, height))
 
 
-def trace_gradient_wave(ctx, ctx_direct, buf, films, sample0, g0, n, stats):
-    """Trace paths g0 .. g0+n-1 of a pass (base and its four offsets, each also at max_depth 1 for
-    the direct light) and add them to `films` (GradientFilms)."""
+def trace_gradient_wave(ctx, buf, films, sample0, g0, n, stats):
+    """Trace paths g0 .. g0+n-1 of a pass (base and its four offsets) and add them to `films`
+    (GradientFilms)."""
     cw = int(ctx.crop[2])
-    cap, cap_d = _Capture(), _Capture()
+    cap = _Capture(buf)
     trace_wave(ctx, buf, _CAMERA, cap, sample0, g0, n, stats)
-    trace_wave(ctx_direct, buf, _CAMERA, cap_d, sample0, g0, n, stats)
     pix, aov = cap.pix, cap.aov
-    base = cap.L - cap_d.L
+    base = cap.L - cap.L_cam
     films.base.add(pix, cap.L, aov)
-    films.direct.add(pix, cap_d.L, aov)
+    films.direct.add(pix, cap.L_cam, aov)
     films.indirect.add(pix, base, aov)
     px, py = pix % cw, pix // cw
     for (dx, dy), src in zip(OFFSETS, _SHIFTED):
         trace_wave(ctx, buf, src, cap, sample0, g0, n, stats)
-        trace_wave(ctx_direct, buf, src, cap_d, sample0, g0, n, stats)
-        d = (cap.L - cap_d.L) - base  # offset minus base: I(p + e) - I(p) for e = (dx, dy)
+        d = (cap.L - cap.L_cam) - base  # offset minus base: I(p + e) - I(p) for e = (dx, dy)
         if dx == 1:
             films.dx.add(pix, d, aov)
         elif dx == -1:
@@ -81,21 +85,12 @@ _CAMERA = CameraSource()
 _SHIFTED = tuple(CameraSource(shift=o) for o in OFFSETS)
 
 
-def direct_context(ctx):
-    """A copy of ctx that traces camera rays to their first hit only (max_depth 1: the emission
-    seen directly)."""
-    c = copy.copy(ctx)
-    c.max_depth = 1
-    return c
-
-
 def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, t_start=None, reserve=0.0,
                     before_wave=None):
     """Render passes of 1, 2, 4, ... spp into `films` (GradientFilms) until `spp` in all, or, with
     a time budget, while the next pass fits in `time - reserve` seconds after t_start; appends
     {spp, time, kind} to `passes` after each. before_wave(n) is called before each wave (it may
     raise to stop: the films keep every finished wave)."""
-    ctx_d = direct_context(ctx)
     done = 0
     pass_spp = 1
     npix = ctx.n_pixels
@@ -116,7 +111,7 @@ def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, t_start
             m = min(buf.size, total - g0)
             if before_wave is not None:
                 before_wave(m)
-            trace_gradient_wave(ctx, ctx_d, buf, films, done, g0, m, stats)
+            trace_gradient_wave(ctx, buf, films, done, g0, m, stats)
         passes.append({"spp": pass_spp, "time": _time.perf_counter() - tp, "kind": "gradient"})
         done += pass_spp
         pass_spp *= 2
