@@ -88,11 +88,11 @@ def solve_l2(base, gx, gy, alpha=0.2):
     return _inverse_l2(rhs, _eigenvalues(base.shape, a2))
 
 
-def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=5, cg_rtol=1e-4):
+def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=10, cg_rtol=1e-4):
     """The L1 screened Poisson reconstruction by IRLS (see the module docstring): `reweights`
     reweightings, each at most `cg_iterations` preconditioned CG steps to relative residual
-    `cg_rtol`, started from the L2 solution. Returns float64 of base's shape. (5 CG steps rather
-    than 20 gave the same relMSE on cornell and glossy renders, in half the time: docs/gradient.md.)"""
+    `cg_rtol`, started from the L2 solution. Returns float64 of base's shape. The number of CG
+    steps trades time for how far gradient outliers are suppressed (docs/gradient.md)."""
     base, gx, gy = _check(base, gx, gy, alpha)
     a2 = float(alpha) ** 2
     lam = _eigenvalues(base.shape, a2)
