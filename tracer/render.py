@@ -99,7 +99,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                tracer.gradient: bsdf sampling only): shift "replay"; recon "l1", "l2" or "none"
                (the base image), with weight recon_alpha on the base. The result's image is then
                the reconstruction, its variance the base image's, and result.buffers holds base,
-               dx, dy (with variances), direct and indirect; stats time the passes and the solve.
+               dx, dy (with variances), direct and indirect; stats time the passes and the solve
+               (time_solve). `callback` is not called between gpt's passes.
 
     The method runs its own schedule of passes (guide.schedule(session), tracer.session): BSDF
     sampling and guides that learn nothing render final passes alone; `grid` and `photon` run
@@ -233,7 +234,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         if gfilms is not None:
             reserve = gradient.solve_time_estimate(recon, crop[2], crop[3], recon_alpha) if time is not None else 0.0
             gradient.gradient_passes(ctx, buf, stats, gfilms, session.passes, spp=spp, time=time, t_start=t_start,
-                                     reserve=reserve, before_wave=session._before_wave)
+                                     reserve=reserve, before_wave=session._before_wave,
+                                     after_wave=session._after_wave)
         elif g is None:
             session.final_passes()
         else:

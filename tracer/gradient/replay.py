@@ -86,11 +86,11 @@ _SHIFTED = tuple(CameraSource(shift=o) for o in OFFSETS)
 
 
 def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, t_start=None, reserve=0.0,
-                    before_wave=None):
+                    before_wave=None, after_wave=None):
     """Render passes of 1, 2, 4, ... spp into `films` (GradientFilms) until `spp` in all, or, with
     a time budget, while the next pass fits in `time - reserve` seconds after t_start; appends
-    {spp, time, kind} to `passes` after each. before_wave(n) is called before each wave (it may
-    raise to stop: the films keep every finished wave)."""
+    {spp, time, kind} to `passes` after each. before_wave(n) and after_wave(n) are called around
+    each wave of n base paths (before_wave may raise to stop: the films keep every finished wave)."""
     done = 0
     pass_spp = 1
     npix = ctx.n_pixels
@@ -112,6 +112,8 @@ def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, t_start
             if before_wave is not None:
                 before_wave(m)
             trace_gradient_wave(ctx, buf, films, done, g0, m, stats)
+            if after_wave is not None:
+                after_wave(m)
         passes.append({"spp": pass_spp, "time": _time.perf_counter() - tp, "kind": "gradient"})
         done += pass_spp
         pass_spp *= 2
