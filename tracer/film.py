@@ -2,7 +2,8 @@
 
 With the box filter each sample lands in its own pixel. The film keeps, per pixel,
 the sample count n, the sum and the sum of squares of the radiance samples (RGB), and
-sums of the AOVs (albedo, shading normal, depth at the first hit). Samples are added in
+sums of the AOVs (albedo at the first vertex that is not a delta BSDF; normal facing the camera and
+depth at the first hit). Samples are added in
 sample-index order, so the float64 sums, and the image, do not depend on wave size or
 thread count.
 """

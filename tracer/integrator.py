@@ -48,7 +48,7 @@ MAX_BOUNCES = 4096
 @kernel
 def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, lt, gs,
           ps, max_depth, rr_depth,
-          beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov,
+          beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open,
           alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
           record, rec_base, prev_rec, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0,
           r_beta, r_pb, r_prev):
@@ -120,14 +120,19 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 for c in range(3):
                     r_L0[prev_rec[i], c] += b[c] * le[c] * x_le
 
-        # AOVs at the first hit: albedo, normal facing the camera, distance
+        # AOVs: normal facing the camera and distance at the first hit; albedo at the first vertex
+        # that is not a delta BSDF (until then, the delta BSDF's own)
+        delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
         if dk == 0:
-            al = bsdfs.bsdf_albedo(mat_type, mat_param, m)
             sgn = 1.0 if cos_o >= 0.0 else -1.0
             for c in range(3):
-                aov[i, c] = al[c]
                 aov[i, 3 + c] = sgn * ng[c]
             aov[i, 6] = t[k]
+        if aov_open[i]:
+            al = bsdfs.bsdf_albedo(mat_type, mat_param, m)
+            for c in range(3):
+                aov[i, c] = al[c]
+            aov_open[i] = delta
 
         # Continue past this vertex?
         if max_depth >= 0 and dk + 1 >= max_depth:
@@ -135,7 +140,6 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         s, tt = frame(ng)
         wo = to_local((-wray[0], -wray[1], -wray[2]), s, tt, ng)
         kk = key[i]  # the path's random stream
-        delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
 
         # Where the guide's map is (node, slot) and the mixing weight a (probability of BSDF sampling)
         node = -1
@@ -252,7 +256,7 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
             rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
         shade(active[:n_active], ro, rd, *hits, *ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth,
               ctx.rr_depth, buf.beta, buf.L, buf.L_cam, buf.depth, buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.pix,
-              buf.aov, buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow,
+              buf.aov, buf.aov_open, buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow,
               record, n_rec, buf.prev_rec, **rec.kernel_args())
         t0 = stats.tick("shade", t0)
         n_next, ns = compact(active[:n_active], buf.alive, buf.next_o, buf.next_d, buf.has_shadow, buf.sh_o,

@@ -42,7 +42,8 @@ FILTERS = ("box", "point")
 @dataclass
 class RenderResult:
     """image (H,W,3) float32 mean radiance; variance (H,W,3) float32 variance of that mean;
-    aovs {albedo (H,W,3), normal (H,W,3), depth (H,W,1)} float32; stats (dict, JSON-ready)."""
+    aovs {albedo (H,W,3) at the first vertex that is not a delta BSDF, normal (H,W,3) and depth
+    (H,W,1) at the first hit} float32; stats (dict, JSON-ready)."""
 
     image: np.ndarray
     variance: np.ndarray

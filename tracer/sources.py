@@ -26,7 +26,7 @@ from .rng import DIM_PIXEL, draw, no_primary_samples, path_key, primary_samples
 
 
 @jit(inline="always")
-def _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain):
+def _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, aov_open, prev_rec, gain):
     for c in range(3):
         beta[i, c] = 1.0
         L[i, c] = 0.0
@@ -37,11 +37,12 @@ def _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain):
     gain[i] = 1.0
     for c in range(N_AOV):
         aov[i, c] = 0.0
+    aov_open[i] = True
 
 
 @kernel
 def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, whole_image, ps, pix, index, key, ray_o,
-                 ray_d, beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain):
+                 ray_d, beta, L, depth, prev_pdf, prev_delta, aov, aov_open, prev_rec, gain):
     """Camera rays for global path indices g0 .. g0+n-1 of a pass (sample-major order).
 
     crop = (x0, y0, w, h): the film covers that window of the width x height image; pix[i] is the
@@ -83,12 +84,12 @@ def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, who
         for c in range(3):
             ray_o[i, c] = o[c]
             ray_d[i, c] = d[c]
-        _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain)
+        _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, aov_open, prev_rec, gain)
 
 
 @kernel
 def probe_paths(origins, directions, keys, g0, pix, index, key, ray_o, ray_d, beta, L, depth, prev_pdf, prev_delta,
-                aov, prev_rec, gain):
+                aov, aov_open, prev_rec, gain):
     """Paths from given rays g0 .. g0+n-1: index[i] = g0 + i (the row, for the sink), no film pixel
     (pix -1: no per-pixel guide map, no weight window), key and ray as given."""
     for i in prange(pix.shape[0]):
@@ -99,7 +100,7 @@ def probe_paths(origins, directions, keys, g0, pix, index, key, ray_o, ray_d, be
         for c in range(3):
             ray_o[i, c] = origins[g, c]
             ray_d[i, c] = directions[g, c]
-        _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, prev_rec, gain)
+        _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, aov_open, prev_rec, gain)
 
 
 class CameraSource:
@@ -128,7 +129,7 @@ class CameraSource:
                      self.shift, self._whole_image(), ps, buf.pix[:n], buf.index[:n], buf.key[:n], buf.ray_o[:n],
                      buf.ray_d[:n],
                      buf.beta[:n], buf.L[:n], buf.depth[:n], buf.prev_pdf[:n], buf.prev_delta[:n], buf.aov[:n],
-                     buf.prev_rec[:n], buf.gain[:n])
+                     buf.aov_open[:n], buf.prev_rec[:n], buf.gain[:n])
         return ps
 
     def _whole_image(self):
@@ -208,7 +209,7 @@ class ProbeSource:
     def start(self, ctx, buf, sample0, g0, n):
         probe_paths(self.origins, self.directions, self.keys, g0, buf.pix[:n], buf.index[:n], buf.key[:n], buf.ray_o[:n],
                     buf.ray_d[:n], buf.beta[:n], buf.L[:n], buf.depth[:n], buf.prev_pdf[:n], buf.prev_delta[:n],
-                    buf.aov[:n], buf.prev_rec[:n], buf.gain[:n])
+                    buf.aov[:n], buf.aov_open[:n], buf.prev_rec[:n], buf.gain[:n])
         return self._ps
 
     def __repr__(self):

@@ -121,6 +121,7 @@ class WaveBuffers:
         self.gain = np.ones(size)
         self.prev_rec = np.zeros(size, np.int64)
         self.aov = np.zeros((size, N_AOV))
+        self.aov_open = np.zeros(size, np.bool_)  # the albedo AOV waits for a vertex that is not a delta BSDF
         self.active = np.zeros(size, np.int64)
         self.active2 = np.zeros(size, np.int64)
         self.ray_o, self.ray_d, self.next_o, self.next_d = z3(), z3(), z3(), z3()

@@ -117,3 +117,29 @@ def test_no_nonfinite_sample_on_the_external_scenes(name):
     assert_clean(r)
     for k, v in r.buffers.items():
         assert np.isfinite(v).all(), k
+
+
+def test_albedo_is_taken_past_a_mirror_and_depth_is_normalised(tmp_path):
+    """A camera facing a mirror that reflects a diffuse wall behind the camera (Kd 0.2 0.5 0.8):
+    every pixel's albedo AOV is the wall's, not the mirror's (for path and gpt alike); the
+    normal and depth stay at the first hit (the mirror, 2 units away); gpt's depth buffer is in
+    [0, 1] with its largest value 1."""
+    from tests import scenes
+
+    big = 20.0
+    mirror = np.array([[-big, -big, -2.0], [big, -big, -2.0], [big, big, -2.0], [-big, big, -2.0]])
+    wall = np.array([[-big, -big, 2.0], [-big, big, 2.0], [big, big, 2.0], [big, -big, 2.0]])
+    quad = np.array([[0, 1, 2], [0, 2, 3]])
+    obj = scenes.write_scene(tmp_path, "mirror", [("mirror", mirror, quad), ("wall", wall, quad)],
+                             {"mirror": "illum 3\nKs 1 1 1", "wall": "Kd 0.2 0.5 0.8\nKe 1 1 1"},
+                             {"camera": {"origin": [0, 0, 0], "target": [0, 0, -1], "up": [0, 1, 0], "fov": 30},
+                              "film": {"width": 8, "height": 8}})
+    scene = tracer.load_scene(obj)
+    for kw in ({}, {"integrator": "gpt"}):
+        r = tracer.render(scene, spp=2, seed=1, max_depth=4, **kw)
+        assert_clean(r)
+        np.testing.assert_allclose(r.aovs["albedo"], np.broadcast_to([0.2, 0.5, 0.8], (8, 8, 3)), atol=1e-6)
+        np.testing.assert_allclose(r.aovs["normal"][..., 2], 1.0, atol=1e-6)  # the mirror's, facing the camera
+        assert (r.aovs["depth"] >= 2.0 - 1e-6).all()
+    d = r.buffers["depth"]
+    assert d.shape == (8, 8, 1) and d.min() >= 0.0 and np.isclose(d.max(), 1.0)

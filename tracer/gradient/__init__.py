@@ -44,7 +44,10 @@ def solve_time_estimate(recon, width, height, alpha):
 
 def solve(films, recon, alpha):
     """Reconstruct from GradientFilms: (image (H,W,3) float64, the reconstruction of the indirect
-    light plus the direct buffer; buffers {name: (H,W,3) float32}; seconds the solve took)."""
+    light plus the direct buffer; buffers {name: float32 (H,W,3), depth (H,W,1)}: base,
+    base_variance, dx, dx_variance, dy, dy_variance, direct, indirect, and the features of a
+    learned reconstruction: albedo (at the first vertex that is not a delta BSDF), normal, depth
+    (divided by the largest, so in [0, 1]); seconds the solve took)."""
     t0 = _time.perf_counter()
     indirect, dx, dy = films.indirect.mean(), films.dx.mean(), films.dy.mean()
     image = poisson.reconstruct(recon, indirect, dx, dy, alpha) + films.direct.mean()
@@ -54,4 +57,10 @@ def solve(films, recon, alpha):
                "dx": f32(dx), "dx_variance": f32(films.dx.variance()), "dy": f32(dy),
                "dy_variance": f32(films.dy.variance()), "direct": f32(films.direct.mean()),
                "indirect": f32(indirect)}
+    aovs = films.base.aovs()
+    depth = aovs["depth"].astype(np.float64)
+    finite = depth[np.isfinite(depth)]
+    top = float(finite.max()) if finite.size and finite.max() > 0 else 1.0
+    buffers.update(albedo=aovs["albedo"], normal=aovs["normal"],
+                   depth=f32(np.clip(np.where(np.isfinite(depth), depth, top) / top, 0.0, 1.0)))
     return image, buffers, t_solve
