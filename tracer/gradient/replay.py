@@ -26,19 +26,11 @@ from ..sources import CameraSource
 OFFSETS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 
 
-class _Capture:
-    """A sink that keeps the samples of the last wave: pix (n,), L (n, 3), aov (n, N_AOV), and the
-    wave's light seen directly by the camera (L_cam, read from the buffer)."""
-
-    def __init__(self, buf):
-        self.buf = buf
+class _Discard:
+    """A sink that keeps nothing: trace_gradient_wave reads the wave's samples from the buffer."""
 
     def add(self, pixel, radiance, aov, weight=None, spread=False):
-        n = pixel.shape[0]
-        self.pix = pixel.copy()
-        self.L = radiance.copy()
-        self.aov = aov.copy()
-        self.L_cam = self.buf.L_cam[:n].copy()
+        pass
 
 
 class GradientFilms:
@@ -56,32 +48,30 @@ class GradientFilms:
 
 def trace_gradient_wave(ctx, buf, films, sample0, g0, n, stats):
     """Trace paths g0 .. g0+n-1 of a pass (base and its four offsets) and add them to `films`
-    (GradientFilms)."""
+    (GradientFilms). Each trace leaves its samples in buf (index, L, L_cam, aov of slots 0..n-1),
+    read before the next trace overwrites them."""
     cw = int(ctx.crop[2])
-    cap = _Capture(buf)
-    trace_wave(ctx, buf, _CAMERA, cap, sample0, g0, n, stats)
-    pix, aov = cap.pix, cap.aov
-    base = cap.L - cap.L_cam
-    films.base.add(pix, cap.L, aov)
-    films.direct.add(pix, cap.L_cam, aov)
+    trace_wave(ctx, buf, _CAMERA, _SINK, sample0, g0, n, stats)
+    pix, aov = buf.index[:n].copy(), buf.aov[:n].copy()
+    full, cam = buf.L[:n], buf.L_cam[:n]
+    base = full - cam
+    films.base.add(pix, full, aov)
+    films.direct.add(pix, cam, aov)
     films.indirect.add(pix, base, aov)
     px, py = pix % cw, pix // cw
-    for (dx, dy), src in zip(OFFSETS, _SHIFTED):
-        trace_wave(ctx, buf, src, cap, sample0, g0, n, stats)
-        d = (cap.L - cap.L_cam) - base  # offset minus base: I(p + e) - I(p) for e = (dx, dy)
-        if dx == 1:
-            films.dx.add(pix, d, aov)
-        elif dx == -1:
-            keep = px >= 1  # the gradient between p - 1 and p, stored at p - 1
-            films.dx.add(pix[keep] - 1, -d[keep], aov[keep])
-        elif dy == 1:
-            films.dy.add(pix, d, aov)
-        else:
-            keep = py >= 1
-            films.dy.add(pix[keep] - cw, -d[keep], aov[keep])
+    for (ox, oy), src in zip(OFFSETS, _SHIFTED):
+        trace_wave(ctx, buf, src, _SINK, sample0, g0, n, stats)
+        d = (buf.L[:n] - buf.L_cam[:n]) - base  # offset minus base: I(p + e) - I(p) for e = (ox, oy)
+        film = films.dx if ox else films.dy
+        if ox + oy > 0:
+            film.add(pix, d, aov)
+        else:  # the gradient between p - e and p, stored at p - e where that is inside the film
+            keep = (px if ox else py) >= 1
+            film.add(pix[keep] - (1 if ox else cw), -d[keep], aov[keep])
 
 
 _CAMERA = CameraSource()
+_SINK = _Discard()
 _SHIFTED = tuple(CameraSource(shift=o) for o in OFFSETS)
 
 
