@@ -83,7 +83,7 @@ def reference_for(path):
     return load(out)
 
 
-# gradient-domain methods: render() arguments (the default shift is replay until another exists)
+# gradient-domain methods: render() arguments (the default shift is hybrid)
 GRADIENT_METHODS = {
     "gpt-l1": {"integrator": "gpt", "recon": "l1"},
     "gpt-l2": {"integrator": "gpt", "recon": "l2"},

@@ -541,6 +541,46 @@ def bsdf_is_delta(mat_type, mat_param, m):
 
 
 @jit
+def bsdf_roughness(mat_type, mat_param, m):
+    """The smallest roughness of material m's lobes (the gradient-domain tracer's hybrid shift
+    reconnects only between rough vertices): inf for diffuse, the GGX alpha for conductor, rough
+    dielectric and plastic (its specular lobe), 0 for the delta materials."""
+    t = mat_type[m]
+    if t == DIFFUSE:
+        return math.inf
+    if t == CONDUCTOR or t == ROUGH_DIELECTRIC or t == PLASTIC:
+        return _alpha(mat_param, m)
+    return 0.0
+
+
+@jit
+def delta_lobe(mat_type, mat_param, m, wo, transmit, radiance):
+    """The delta lobe of material m that reflects wo (transmit False) or refracts it (True), as
+    bsdf_sample would pick it: (wi, value f |cos| in the discrete measure, probability that
+    bsdf_sample picks this lobe). Probability 0 where there is no such lobe (a material that is not
+    delta, total internal reflection, a grazing wo)."""
+    t = mat_type[m]
+    if wo[2] == 0.0:
+        return _ZERO3, _ZERO3, 0.0
+    if t == MIRROR:
+        if transmit:
+            return _ZERO3, _ZERO3, 0.0
+        return (-wo[0], -wo[1], wo[2]), _ks(mat_param, m), 1.0
+    if t != DIELECTRIC or not mat_param[m, 7] > 0.0:
+        return _ZERO3, _ZERO3, 0.0
+    ior = mat_param[m, 7]
+    sgn = 1.0 if wo[2] > 0.0 else -1.0
+    eta = ior if wo[2] > 0.0 else 1.0 / ior
+    f, cos_t = fresnel_dielectric(abs(wo[2]), eta)
+    if not transmit:
+        return (-wo[0], -wo[1], wo[2]), (f, f, f), f
+    if f >= 1.0:
+        return _ZERO3, _ZERO3, 0.0
+    s = (1.0 - f) / (eta * eta) if radiance else 1.0 - f
+    return (-wo[0] / eta, -wo[1] / eta, -sgn * cos_t), (s, s, s), 1.0 - f
+
+
+@jit
 def bsdf_albedo(mat_type, mat_param, m):
     """A cheap albedo 3-tuple for the AOV: kd; ks (metals); min(kd + ks, 1) (plastic); 1 (glass)."""
     t = mat_type[m]

@@ -35,7 +35,11 @@ def _parser():
                         "an unknown key is an error that lists the valid ones")
     p.add_argument("--integrator", default="path",
                    help="path (default) or gpt: gradient-domain path tracing, reconstructed by --recon")
-    p.add_argument("--shift", default="replay", help="gpt: the shift mapping of offset paths: replay (default)")
+    p.add_argument("--shift", default="hybrid",
+                   help="gpt: the shift mapping of offset paths: hybrid (default: reconnection between rough "
+                        "vertices, half-vector copy elsewhere) or replay (the same random numbers)")
+    p.add_argument("--shift-roughness", type=float, default=0.001, metavar="R",
+                   help="gpt, hybrid shift: vertices rougher than R (GGX alpha) are reconnected (default 0.001)")
     p.add_argument("--recon", default="l1", help="gpt: screened Poisson reconstruction l1 (default), l2, or none "
                                                  "(the base image)")
     p.add_argument("--recon-alpha", type=float, default=0.2, metavar="A",
@@ -236,7 +240,7 @@ def _run(argv, warnings):
     if args.integrator not in gradient.INTEGRATORS:
         raise unknown_name("integrator", args.integrator, gradient.INTEGRATORS)
     if args.integrator == "gpt":
-        gradient.check_settings(args.shift, args.recon, args.recon_alpha)
+        gradient.check_settings(args.shift, args.recon, args.recon_alpha, args.shift_roughness)
         if args.guide != "bsdf":
             raise TracerError(f"--integrator gpt samples the BSDF only; --guide {args.guide} goes with --integrator path")
     scene = load_scene(args.scene, **overrides)
@@ -261,7 +265,8 @@ def _run(argv, warnings):
                     rr_depth=args.rr_depth, seed=args.seed, accel=args.accel, threads=args.threads,
                     pixel_filter=args.filter, crop=crop,
                     wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet, integrator=args.integrator,
-                    shift=args.shift, recon=args.recon, recon_alpha=args.recon_alpha)
+                    shift=args.shift, recon=args.recon, recon_alpha=args.recon_alpha,
+                    shift_roughness=args.shift_roughness)
     if ref is not None:
         result.stats["metrics"] = metrics.all_metrics(result.image, ref)
     exr, png, js = write_outputs(result, out, exposure=args.exposure, variance=args.variance)

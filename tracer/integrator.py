@@ -176,7 +176,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
 
         # Possibly terminate the path with Russian roulette
         if ok and dk + 1 >= rr_depth:
-            ok, nb = russian_roulette(nb, gn, draw(ps, kk, i, bounce_dim(dk, RR)))
+            ok, nb, _ = russian_roulette(nb, gn, draw(ps, kk, i, bounce_dim(dk, RR)))
         if dk + 1 >= MAX_BOUNCES:
             ok = False
 

@@ -79,8 +79,8 @@ def _int_setting(name, value, lo):
 
 def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=None, seed=None,
            accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
-           guide_settings=None, pixel_filter="box", crop=None, integrator="path", shift="replay", recon="l1",
-           recon_alpha=0.2):
+           guide_settings=None, pixel_filter="box", crop=None, integrator="path", shift="hybrid", recon="l1",
+           recon_alpha=0.2, shift_roughness=gradient.ROUGHNESS):
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
     spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
@@ -97,7 +97,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     crop       (x0, y0, w, h): render only that window of the image (its pixels are the same
                samples as in the full render)
     integrator "path" (unidirectional path tracing) or "gpt" (gradient-domain path tracing,
-               tracer.gradient: bsdf sampling only): shift "replay"; recon "l1", "l2" or "none"
+               tracer.gradient: bsdf sampling only): shift "hybrid" (reconnecting vertices rougher
+               than shift_roughness) or "replay"; recon "l1", "l2" or "none"
                (the base image), with weight recon_alpha on the base. The result's image is then
                the reconstruction, its variance the base image's, and result.buffers holds base,
                dx, dy (with variances), direct and indirect; stats time the passes and the solve
@@ -130,7 +131,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     n_threads = min(threads or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS)
     with _NumbaThreads(n_threads):  # every kernel of this render on n_threads, restored after
         return _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress,
-                       callback, guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha)
+                       callback, guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha,
+                       shift_roughness)
 
 
 def _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop):
@@ -162,12 +164,13 @@ def make_context(scene, accel="embree", seed=None, max_depth=None, rr_depth=None
 
 
 def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress, callback,
-            guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha):
+            guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha, shift_roughness):
     """render() on n_threads Numba threads."""
     if integrator not in gradient.INTEGRATORS:
         raise unknown_name("integrator", integrator, gradient.INTEGRATORS)
     if integrator == "gpt":
-        shift, recon, recon_alpha = gradient.check_settings(shift, recon, recon_alpha)
+        shift, recon, recon_alpha, shift_roughness = gradient.check_settings(shift, recon, recon_alpha,
+                                                                             shift_roughness)
         if not (isinstance(guide, str) and guide == "bsdf"):
             raise SettingsError(f"integrator gpt samples the BSDF only; a guide ({guide!r}) goes with integrator path")
     rs = scene.render
@@ -200,6 +203,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         warm_up_guides(ctx)
     if splits:
         warm_up_splitting(ctx)
+    if integrator == "gpt":
+        gradient.warm_up(ctx, shift, shift_roughness)
     t_compile = _time.perf_counter() - t0
     t_start = _time.perf_counter() - t_setup  # the budget counts the scene set-up, not the compile
     npix = ctx.n_pixels
@@ -220,6 +225,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
                 "wave_size": int(wave_size), "integrator": integrator, **provenance()}
     if integrator == "gpt":
         settings.update(shift=shift, recon=recon, recon_alpha=recon_alpha)
+        if shift == "hybrid":
+            settings.update(shift_roughness=shift_roughness)
 
     def snapshot():
         return _stats(scene, stats, session.passes, session.sample0, t_setup, t_render, settings, t_compile, g)
@@ -236,7 +243,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
             reserve = gradient.solve_time_estimate(recon, crop[2], crop[3], recon_alpha) if time is not None else 0.0
             gradient.gradient_passes(ctx, buf, stats, gfilms, session.passes, spp=spp, time=time, t_start=t_start,
                                      reserve=reserve, before_wave=session._before_wave,
-                                     after_wave=session._after_wave)
+                                     after_wave=session._after_wave, shift=shift, roughness=shift_roughness)
         elif g is None:
             session.final_passes()
         else:

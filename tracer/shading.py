@@ -99,24 +99,38 @@ def next_event(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot,
     the power heuristic against the mixture density of the same direction. Returns (ok, origin,
     unit direction, tmax, contribution beta f le w / p_light): the shadow ray to trace, and what it
     adds if unblocked. ok is False where nothing is to be traced."""
+    ok, so, sd, tmax, contrib, _, _, _, _, _, _, _ = light_sample_at(
+        mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1)
+    return ok, so, sd, tmax, contrib
+
+
+@jit(inline="always")
+def light_sample_at(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot, a, eps, tri_eps, u_light,
+                    u_pos0, u_pos1):
+    """next_event with the light sample itself: (ok, origin, direction, tmax, contribution, wl (unit
+    world direction), dist (inf: the environment), le, pl (solid-angle density, 0: no sample),
+    lt_tri (-1: the environment), f (f |cos|), pb (the mixture density of wl)). The gradient-domain
+    tracer shifts this sample to its offset paths."""
     wl, dist, le, pl, lt_tri = sample_light(lt, tri, x, u_light, u_pos0, u_pos1)
     ok = False
     so = x
     sd = wl
     tmax = 0.0
     contrib = BLACK
+    f = BLACK
+    pb = 0.0
     if pl > 0.0 and (le[0] > 0.0 or le[1] > 0.0 or le[2] > 0.0):
         wil = to_local(wl, s, t, ng)
         f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wil, True)
+        pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wil), wl)
         if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
-            pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wil), wl)
             w = power_heuristic(pl, pb)
             so, sd, tmax = shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps)
             if tmax > 0.0:
                 ok = True
                 contrib = (beta[0] * f[0] * le[0] * w / pl, beta[1] * f[1] * le[1] * w / pl,
                            beta[2] * f[2] * le[2] * w / pl)
-    return ok, so, sd, tmax, contrib
+    return ok, so, sd, tmax, contrib, wl, dist, le, pl, lt_tri, f, pb
 
 
 @jit(inline="always")
@@ -153,12 +167,12 @@ def sample_mixture(mat_type, mat_param, m, gs, slot, a, wo, s, t, ng, u0, u1, u_
 
 @jit(inline="always")
 def russian_roulette(beta, gain, u):
-    """Continue with probability q = min(max(beta) / gain, 0.95), deciding by u: (survives, beta / q).
+    """Continue with probability q = min(max(beta) / gain, 0.95), deciding by u: (survives, beta / q, q).
     beta / gain is the throughput BSDF sampling would have had: on beta itself the roulette would
     undo a guide, since a guided direction's small weight f cos / p would be raised back to ~1 by
     a matching chance of death (a path's survival density ~ f cos)."""
     bmax = max(beta[0], max(beta[1], beta[2]))
     q = min(bmax / gain, 0.95)
     if u >= q:
-        return False, beta
-    return True, (beta[0] / q, beta[1] / q, beta[2] / q)
+        return False, beta, q
+    return True, (beta[0] / q, beta[1] / q, beta[2] / q), q

@@ -1,5 +1,6 @@
-"""Gradient-domain path tracing (random replay): the base image, the gradients, the outputs."""
+"""Gradient-domain path tracing (both shifts): the base image, the gradients, the outputs."""
 import json
+import math
 import os
 
 import numpy as np
@@ -19,12 +20,13 @@ def _scene(name, w=32, h=32):
     return tracer.load_scene(os.path.join(ROOT, "scenes", name, f"{name}.obj"), width=w, height=h)
 
 
-def test_the_base_image_is_the_path_tracers_image():
+@pytest.mark.parametrize("shift", ["hybrid", "replay"])
+def test_the_base_image_is_the_path_tracers_image(shift):
     """The base paths are the camera's paths with the same keys: the base image equals a path
     render of the same seed bit for bit (so it is unbiased exactly as the path tracer is), and the
     direct and indirect buffers add up to it."""
     scene = _scene("cornell")
-    g = tracer.render(scene, spp=8, integrator="gpt", recon="none", seed=3, max_depth=6)
+    g = tracer.render(scene, spp=8, integrator="gpt", recon="none", seed=3, max_depth=6, shift=shift)
     p = tracer.render(scene, spp=8, seed=3, max_depth=6)
     assert_clean(g)
     np.testing.assert_array_equal(g.buffers["base"], p.image)
@@ -32,15 +34,18 @@ def test_the_base_image_is_the_path_tracers_image():
     assert g.stats["samples"] == p.stats["samples"]
 
 
+@pytest.mark.parametrize("shift", ["hybrid", "replay", "half-vector"])
 @pytest.mark.parametrize("name", ["cornell", "glossy"])
-def test_gradients_are_the_differences_of_the_path_tracers_pixels(name):
+def test_gradients_are_the_differences_of_the_path_tracers_pixels(name, shift):
     """Where no emitter is seen directly from the two pixels (the gradients hold the indirect
     light), dx(x, y) estimates I(x+1, y) - I(x, y) and dy(x, y) I(x, y+1) - I(x, y): against an
     independent path render (another seed), the per-pixel z-scores have sum of squares below the
     chi-square quantile and mean within its z-bound (Sidak over 4 tests). Detects a sign error, a
-    pixel off by one or a factor 2 (the -x side's sign flipped: sum z^2 ~ 4500 over 543 pixels)."""
+    pixel off by one or a factor 2 (the -x side's sign flipped: sum z^2 ~ 4500 over 543 pixels).
+    "half-vector": the hybrid shift with no vertex rough enough to reconnect (copies everywhere)."""
     scene = _scene(name, 24, 24)
-    g = tracer.render(scene, spp=64, integrator="gpt", recon="none", seed=11, max_depth=5)
+    kw = {"shift": "hybrid", "shift_roughness": math.inf} if shift == "half-vector" else {"shift": shift}
+    g = tracer.render(scene, spp=64, integrator="gpt", recon="none", seed=11, max_depth=5, **kw)
     p = tracer.render(scene, spp=512, seed=12, max_depth=5)
     assert_clean(g)
     img = p.image.astype(np.float64).mean(axis=2)
@@ -76,7 +81,8 @@ def test_no_nonfinite_sample_on_any_built_in_scene(name):
 
 def test_reconstruction_settings_are_checked():
     scene = _scene("cornell", 8, 8)
-    for kw, frag in (({"integrator": "gtp"}, "integrator"), ({"integrator": "gpt", "shift": "hybrid"}, "shift"),
+    for kw, frag in (({"integrator": "gtp"}, "integrator"), ({"integrator": "gpt", "shift": "manifold"}, "shift"),
+                     ({"integrator": "gpt", "shift_roughness": -1.0}, "shift_roughness"),
                      ({"integrator": "gpt", "recon": "l3"}, "reconstruction"),
                      ({"integrator": "gpt", "recon_alpha": 0.0}, "recon_alpha"),
                      ({"integrator": "gpt", "guide": "photon"}, "BSDF only")):
@@ -93,6 +99,7 @@ def test_cli_writes_the_reconstruction_and_the_buffers(tmp_path, capsys):
         assert (tmp_path / "g" / ("c" + suffix)).exists(), suffix
     st = json.loads((tmp_path / "g" / "c.json").read_text())
     assert st["integrator"] == "gpt" and st["recon"] == "l2" and st["time_solve"] >= 0.0
+    assert st["shift"] == "hybrid" and st["shift_roughness"] == 0.001
     assert st["nonfinite_samples"] == 0
     dx = tracer.read_image(str(tmp_path / "g" / "c.dx.exr"))
     assert dx.shape == (16, 16, 3) and np.isfinite(dx).all()

@@ -1,6 +1,6 @@
 """Gradient-domain path tracing (`render(..., integrator="gpt")`): a base image and its
-horizontal and vertical gradients from correlated offset paths (replay.py), reconstructed by
-screened Poisson (poisson.py)."""
+horizontal and vertical gradients from correlated offset paths (the hybrid shift: hybrid.py; random
+replay: replay.py), reconstructed by screened Poisson (poisson.py)."""
 import time as _time
 
 import numpy as np
@@ -9,19 +9,31 @@ from ..errors import SettingsError, unknown_name
 from . import poisson
 from .replay import GradientFilms, gradient_passes  # noqa: F401
 
-SHIFTS = ("replay",)
+SHIFTS = ("hybrid", "replay")
+ROUGHNESS = 0.001  # the hybrid shift reconnects between vertices rougher than this
 INTEGRATORS = ("path", "gpt")
 
 
-def check_settings(shift, recon, alpha):
-    """(shift, recon, alpha) checked: one clear error for each bad value."""
+def check_settings(shift, recon, alpha, roughness=ROUGHNESS):
+    """(shift, recon, alpha, roughness) checked: one clear error for each bad value."""
     if shift not in SHIFTS:
         raise unknown_name("shift", shift, SHIFTS)
+    if isinstance(roughness, bool) or not isinstance(roughness, (int, float)) or not roughness >= 0:
+        raise SettingsError(f"shift_roughness must be a number >= 0 (inf: never reconnect), got {roughness!r}")
     if recon not in poisson.RECONSTRUCTIONS:
         raise unknown_name("reconstruction", recon, poisson.RECONSTRUCTIONS)
     if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not (np.isfinite(alpha) and alpha > 0):
         raise SettingsError(f"recon_alpha must be a positive number, got {alpha!r}")
-    return shift, recon, float(alpha)
+    return shift, recon, float(alpha), float(roughness)
+
+
+def warm_up(ctx, shift, roughness):
+    """Compile (or load from the cache) the kernels of `shift` before a render's clock starts."""
+    if shift == "hybrid":
+        from ..wave import WaveBuffers
+        from . import hybrid
+
+        hybrid.warm_up(ctx, WaveBuffers(1), roughness)
 
 
 def solve_time_estimate(recon, width, height, alpha):

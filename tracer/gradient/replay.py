@@ -50,24 +50,34 @@ def trace_gradient_wave(ctx, buf, films, sample0, g0, n, stats):
     """Trace paths g0 .. g0+n-1 of a pass (base and its four offsets) and add them to `films`
     (GradientFilms). Each trace leaves its samples in buf (index, L, L_cam, aov of slots 0..n-1),
     read before the next trace overwrites them."""
-    cw = int(ctx.crop[2])
+    G = np.empty((n, len(OFFSETS), 3))
+    for o, src in enumerate(_SHIFTED):
+        trace_wave(ctx, buf, src, _SINK, sample0, g0, n, stats)
+        G[:, o] = buf.L[:n] - buf.L_cam[:n]  # the offset's value, less the light its camera ray sees
     trace_wave(ctx, buf, _CAMERA, _SINK, sample0, g0, n, stats)
-    pix, aov = buf.index[:n].copy(), buf.aov[:n].copy()
+    G -= (buf.L[:n] - buf.L_cam[:n])[:, None, :]  # offset minus base: I(p + e) - I(p)
+    add_gradients(ctx, buf, films, n, G)
+
+
+def add_gradients(ctx, buf, films, n, G):
+    """Add a wave's n base samples (buf: index, L, L_cam, aov) and gradient samples G (n, 4, 3),
+    G[:, o] an estimate of I(p + e) - I(p) for offset e = OFFSETS[o], to `films`: dx at (x, y) gets
+    the +x sample of (x, y) and minus the -x sample of (x + 1, y) (where x + 1 is inside the film),
+    and dy likewise."""
+    cw = int(ctx.crop[2])
+    pix, aov = buf.index[:n], buf.aov[:n]
     full, cam = buf.L[:n], buf.L_cam[:n]
-    base = full - cam
     films.base.add(pix, full, aov)
     films.direct.add(pix, cam, aov)
-    films.indirect.add(pix, base, aov)
+    films.indirect.add(pix, full - cam, aov)
     px, py = pix % cw, pix // cw
-    for (ox, oy), src in zip(OFFSETS, _SHIFTED):
-        trace_wave(ctx, buf, src, _SINK, sample0, g0, n, stats)
-        d = (buf.L[:n] - buf.L_cam[:n]) - base  # offset minus base: I(p + e) - I(p) for e = (ox, oy)
+    for o, (ox, oy) in enumerate(OFFSETS):
         film = films.dx if ox else films.dy
         if ox + oy > 0:
-            film.add(pix, d, aov)
+            film.add(pix, G[:, o], aov)
         else:  # the gradient between p - e and p, stored at p - e where that is inside the film
             keep = (px if ox else py) >= 1
-            film.add(pix[keep] - (1 if ox else cw), -d[keep], aov[keep])
+            film.add(pix[keep] - (1 if ox else cw), -G[keep, o], aov[keep])
 
 
 _CAMERA = CameraSource()
@@ -76,11 +86,22 @@ _SHIFTED = tuple(CameraSource(shift=o) for o in OFFSETS)
 
 
 def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, t_start=None, reserve=0.0,
-                    before_wave=None, after_wave=None):
+                    before_wave=None, after_wave=None, shift="replay", roughness=0.001):
     """Render passes of 1, 2, 4, ... spp into `films` (GradientFilms) until `spp` in all, or, with
     a time budget, while the next pass fits in `time - reserve` seconds after t_start; appends
     {spp, time, kind} to `passes` after each. before_wave(n) and after_wave(n) are called around
-    each wave of n base paths (before_wave may raise to stop: the films keep every finished wave)."""
+    each wave of n base paths (before_wave may raise to stop: the films keep every finished wave).
+    shift: "replay" (here) or "hybrid" (hybrid.py, reconnecting above `roughness`)."""
+    if shift == "hybrid":
+        from . import hybrid
+
+        hb = hybrid.HybridBuffers(buf.size)
+
+        def trace(sample0, g0, m):
+            hybrid.trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, m, stats, float(roughness))
+    else:
+        def trace(sample0, g0, m):
+            trace_gradient_wave(ctx, buf, films, sample0, g0, m, stats)
     done = 0
     pass_spp = 1
     npix = ctx.n_pixels
@@ -101,7 +122,7 @@ def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, t_start
             m = min(buf.size, total - g0)
             if before_wave is not None:
                 before_wave(m)
-            trace_gradient_wave(ctx, buf, films, done, g0, m, stats)
+            trace(done, g0, m)
             if after_wave is not None:
                 after_wave(m)
         passes.append({"spp": pass_spp, "time": _time.perf_counter() - tp, "kind": "gradient"})
