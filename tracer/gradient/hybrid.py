@@ -56,7 +56,9 @@ from ..shading import shadow_ray
 from ..sources import CameraSource
 from ..wave import sanitize
 
-TRACED, RECENT, CONNECTED = 0, 1, 2  # offset status: own vertex; reconnected one bounce ago; the base's vertices
+# offset status: own vertex; reconnected one bounce ago; the base's vertices; reconnected through an
+# occluder (a failed shift that still enters the weights of the emission at the base's vertex)
+TRACED, RECENT, CONNECTED, BLOCKED = 0, 1, 2, 3
 
 
 class HybridBuffers:
@@ -69,9 +71,15 @@ class HybridBuffers:
         self.b_prim = z(d=np.int64)
         self.b_pdf = z()
         self.b_delta, self.b_rough = z(d=np.bool_), z(d=np.bool_)
-        self.sh_G = z(4, 3)  # gradient terms that need the base's shadow ray
+        # NEE terms, weighted once the shadow rays are known: the base's value, light and BSDF
+        # densities; per offset a mode (0 no term, 1 the base alone, 2 the base's shadow ray,
+        # 3 its own), value, R J_L, light and BSDF densities, and the visibility of its own ray
+        self.n_cn, self.n_pl, self.n_pb, self.vis_b = z(3), z(), z(), z(d=np.bool_)
+        self.n_mode = z(4, d=np.int8)
+        self.n_co, self.n_rj, self.n_plo, self.n_pbo, self.vis = z(4, 3), z(4), z(4), z(4), z(4, d=np.bool_)
         self.G = z(4, 3)  # per path and offset: the weighted gradient I(p + e) - I(p) found so far
         self.alive, self.rough, self.hv = z(4, d=np.bool_), z(4, d=np.bool_), z(4, d=np.bool_)
+        self.lights = z(4, d=np.bool_)  # the pair's last bounce counts the light techniques (not a copy)
         self.trace, self.reconn, self.sh = z(4, d=np.bool_), z(4, d=np.bool_), z(4, d=np.bool_)
         self.status, self.prim = z(4, d=np.int8), z(4, d=np.int64)
         self.beta, self.x, self.wo = z(4, 3), z(4, 3), z(4, 3)
@@ -80,12 +88,13 @@ class HybridBuffers:
         self.ray_o, self.ray_d, self.tmax = z(4, 3), z(4, 3), z(4)
         self.hit_t, self.hit_b1, self.hit_b2 = z(4), z(4), z(4)
         self.hit_prim = z(4, d=np.int64)
-        self.sh_o, self.sh_d, self.sh_C, self.sh_tmax = z(4, 3), z(4, 3), z(4, 3), z(4)
+        self.sh_o, self.sh_d, self.sh_tmax = z(4, 3), z(4, 3), z(4)
 
     def offset_state(self):
         """The offset arrays in the order the kernels take them."""
         return (self.alive, self.status, self.beta, self.R, self.x, self.prim, self.wo, self.pdf, self.delta,
-                self.dist2, self.rough, self.hv, self.trace, self.reconn, self.ray_o, self.ray_d, self.tmax)
+                self.dist2, self.rough, self.hv, self.lights, self.trace, self.reconn, self.ray_o, self.ray_d,
+                self.tmax)
 
 
 @jit(inline="always")
@@ -126,6 +135,13 @@ def start_offsets(cam, width, height, crop, jitter, ps, key, pix, o_ray_o, o_ray
             o_hv[i, o] = False
             o_trace[i, o] = True
             o_reconn[i, o] = False
+
+
+@jit(inline="always")
+def _finite(o_beta, o_R, i, o):
+    """beta_o and R of offset o of path i are finite (a failed shift where they overflow)."""
+    return (math.isfinite(o_R[i, o]) and math.isfinite(o_beta[i, o, 0]) and math.isfinite(o_beta[i, o, 1])
+            and math.isfinite(o_beta[i, o, 2]))
 
 
 @jit(inline="always")
@@ -213,11 +229,13 @@ def half_vector_shift(mat_type, mat_param, mx, my, wo_b, wi_b, wo_o, delta):
 @kernel
 def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, roughness,
                   b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
-                  o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_trace,
-                  o_reconn, o_ray_o, o_ray_d, o_tmax):
+                  o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights,
+                  o_trace, o_reconn, o_ray_o, o_ray_d, o_tmax):
     """Shift each offset across the base's last bounce x_i -> x_{i+1} (entry k: path active[k], its
     ray ray_d[k] and hit t, prim): reconnection (a visibility ray to test, o_reconn) or half-vector
-    copy (a ray to trace, o_trace); updates beta_o, R, and the offset's last density."""
+    copy (a ray to trace, o_trace); updates beta_o, R, and the offset's last density. o_lights: whether
+    the pair's weights for this bounce count the light techniques (not after a half-vector copy, whose
+    pairs take no NEE either: NEE reconnects, and both techniques must map a path to the same partner)."""
     for k in prange(active.shape[0]):
         i = active[k]
         p1 = prim[k]
@@ -237,6 +255,7 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material,
         for o in range(4):
             o_trace[i, o] = False
             o_reconn[i, o] = False
+            o_lights[i, o] = True
             if not o_alive[i, o]:
                 continue
             st = o_status[i, o]
@@ -312,9 +331,12 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material,
                 o_dist2[i, o] = d2
                 o_status[i, o] = RECENT
                 o_hv[i, o] = False
-                o_reconn[i, o] = True
+                o_reconn[i, o] = _finite(o_beta, o_R, i, o)
+                o_alive[i, o] = o_reconn[i, o]
                 continue
-            # Half-vector copy
+            # Half-vector copy (between vertices of the same class; a delta vertex and one that is not
+            # have no partner either way, and keep the base's two techniques)
+            o_lights[i, o] = b_delta[i] != bsdfs.bsdf_is_delta(mat_type, mat_param, my)
             ok, wi_o, f, po, jac = half_vector_shift(mat_type, mat_param, mx, my, wo_b, wi_b, wo_o, b_delta[i])
             if not ok:
                 o_alive[i, o] = False
@@ -331,6 +353,8 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material,
             o_delta[i, o] = b_delta[i]
             o_hv[i, o] = b_rough[i] and o_rough[i, o]
             o_trace[i, o] = True
+            if not _finite(o_beta, o_R, i, o):
+                o_alive[i, o] = False
 
 
 @jit(inline="always")
@@ -354,14 +378,16 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                  ps, max_depth, rr_depth, roughness,
                  beta, L, L_cam, depth, prev_pdf, prev_delta, key, aov, aov_open,
                  alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
-                 b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough, sh_G, G,
-                 o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_trace,
-                 hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o, o_sh_d, o_sh_tmax, o_sh_C):
+                 b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough, G,
+                 o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights,
+                 o_trace, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o, o_sh_d, o_sh_tmax,
+                 n_cn, n_pl, n_pb, n_mode, n_co, n_rj, n_plo, n_pbo, vis):
     """One bounce of base and offset paths: the vertices the offsets reached, emission (the base's
-    as the path tracer's, the gradients' with the four-technique weights), NEE shifted to the
-    offsets, the base's direction and roulette. Entry k is path active[k]; the offsets' hits of
-    traced rays are in hit_* (where o_trace). Shadow rays: the base's (has_shadow, sh_*; adds sh_L
-    to L and sh_G to G if unblocked) and the offsets' own (o_sh, o_sh_*; add o_sh_C to G)."""
+    as the path tracer's, the gradients' with the pair weights), NEE shifted to the offsets, the
+    base's direction and roulette. Entry k is path active[k]; the offsets' hits of traced rays are in
+    hit_* (where o_trace). Shadow rays: the base's (has_shadow, sh_*: sh_L its value for L) and the
+    offsets' own (o_sh, o_sh_*); the NEE terms n_* are weighted by add_next_event once they are
+    traced."""
     for k in prange(active.shape[0]):
         i = active[k]
         alive[k] = False
@@ -372,8 +398,8 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         p = prim[k]
         for o in range(4):
             o_sh[i, o] = False
-            for c in range(3):
-                sh_G[i, o, c] = 0.0
+            vis[i, o] = False
+            n_mode[i, o] = 0
         if dk == 0:
             for c in range(3):
                 L_cam[i, c] = 0.0
@@ -427,19 +453,26 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         if dk > 0:
             rb = pl / prev_pdf[i]
             for o in range(4):
-                if not o_alive[i, o]:
+                if not o_alive[i, o]:  # the base's techniques alone: the path tracer's weight (BSDF's
+                    wd = w if o_lights[i, o] else 1.0  # alone after a failed half-vector copy)
                     for c in range(3):
-                        G[i, o, c] -= cb[c] * w
+                        G[i, o, c] -= cb[c] * wd
                     continue
                 leo, plo = _emitted_by(lt, tri_normal, o_prim[i, o], (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]),
                                        o_dist2[i, o], o_delta[i, o])
                 ro = plo / o_pdf[i, o]
-                R = o_R[i, o]
-                wg = 1.0 / (1.0 + rb * rb + R * R * (1.0 + ro * ro))
+                R2 = o_R[i, o] * o_R[i, o]
+                if o_status[i, o] == BLOCKED:  # no BSDF sample reaches x through the occluder: no light
+                    den = 1.0 + rb * rb + R2 * ro * ro
+                    leo = (0.0, 0.0, 0.0)
+                elif o_lights[i, o]:
+                    den = 1.0 + rb * rb + R2 * (1.0 + ro * ro)
+                else:
+                    den = 1.0 + R2
                 for c in range(3):
-                    G[i, o, c] += wg * (o_beta[i, o, c] * leo[c] - cb[c])
-        for o in range(4):  # an offset that escaped ends here
-            if o_alive[i, o] and o_prim[i, o] < 0:
+                    G[i, o, c] += (o_beta[i, o, c] * leo[c] - cb[c]) / den
+        for o in range(4):  # an offset that escaped, or was blocked, ends here
+            if o_alive[i, o] and (o_prim[i, o] < 0 or o_status[i, o] == BLOCKED):
                 o_alive[i, o] = False
         if p < 0:
             continue
@@ -477,6 +510,11 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 mat_type, mat_param, m, lt, tri, x, ng, s, tt, wo, b, gs, -1, 1.0, tri_eps[p], tri_eps,
                 draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
                 draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)))
+            valid = pll > 0.0 and (lel[0] > 0.0 or lel[1] > 0.0 or lel[2] > 0.0)
+            if valid and not ok:  # no value, but its visibility enters the pairs' weights
+                so, sd, tmax = shadow_ray(x, ng, tri_eps[p], wl, dist, lt, lt_tri, tri_eps)
+                ok = tmax > 0.0
+                contrib = (0.0, 0.0, 0.0)
             if ok:
                 for c in range(3):
                     sh_o[k, c] = so[c]
@@ -484,16 +522,25 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                     sh_L[k, c] = contrib[c]
                 sh_tmax[k] = tmax
                 has_shadow[k] = True
-            if pll > 0.0 and (lel[0] > 0.0 or lel[1] > 0.0 or lel[2] > 0.0):
-                cn = (b[0] * fb[0] * lel[0] / pll, b[1] * fb[1] * lel[1] / pll, b[2] * fb[2] * lel[2] / pll)
+            if valid:
+                n_pl[i] = pll
+                n_pb[i] = pbb
+                for c in range(3):
+                    n_cn[i, c] = b[c] * fb[c] * lel[c] / pll
                 zl = (x[0] + dist * wl[0], x[1] + dist * wl[1], x[2] + dist * wl[2])
+                rough_z = lt_tri < 0 or _is_rough(mat_type, mat_param, tri_material[lt_tri], roughness)
                 for o in range(4):
                     if not o_alive[i, o]:
-                        if ok:
-                            for c in range(3):
-                                sh_G[i, o, c] = -contrib[c]
+                        n_mode[i, o] = 1
                         continue
                     st = o_status[i, o]
+                    if st == TRACED and not (rough and o_rough[i, o] and rough_z):
+                        # The pair's BSDF sample would be copied, not reconnected: no NEE for it (NEE
+                        # reconnects, and both techniques must map a path to the same partner). An
+                        # offset at a delta vertex has no partner either way: the base's two techniques.
+                        if bsdfs.bsdf_is_delta(mat_type, mat_param, tri_material[o_prim[i, o]]):
+                            n_mode[i, o] = 1
+                        continue
                     y = x
                     ngy = ng
                     sy = s
@@ -505,11 +552,6 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                         ngy = (tri_normal[py, 0], tri_normal[py, 1], tri_normal[py, 2])
                         sy, ty = frame(ngy)
                     my = tri_material[py]
-                    if bsdfs.bsdf_is_delta(mat_type, mat_param, my):  # no NEE there: the base's weight alone
-                        if ok:
-                            for c in range(3):
-                                sh_G[i, o, c] = -contrib[c]
-                        continue
                     wo_o = to_local((o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]), sy, ty, ngy)
                     wlo = wl
                     disto = dist
@@ -520,38 +562,30 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                         li = lt.light_of_tri[lt_tri]
                         nl = (lt.normal[li, 0], lt.normal[li, 1], lt.normal[li, 2])
                         wlo, disto, jl = reconnection(x, y, zl, nl)
-                        if not jl > 0.0:
-                            if ok:
-                                for c in range(3):
-                                    sh_G[i, o, c] = -contrib[c]
+                        if not jl > 0.0:  # no partner path: the base's techniques alone
+                            n_mode[i, o] = 1
                             continue
                         cos_l = -dot(wlo, nl)
                         leo = triangle_emission(lt, lt_tri, cos_l)
                         plo = triangle_light_pdf(lt, lt_tri, disto * disto, cos_l)
                     wil = to_local(wlo, sy, ty, ngy)
                     fo = bsdfs.bsdf_eval(mat_type, mat_param, my, wo_o, wil, True)
-                    pbo = bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wil)
-                    rj = o_R[i, o] * jl
-                    wg = pll * pll / (pll * pll + pbb * pbb + rj * rj * (plo * plo + pbo * pbo))
-                    co = (wg * o_beta[i, o, 0] * jl * fo[0] * leo[0] / pll, wg * o_beta[i, o, 1] * jl * fo[1] * leo[1] / pll,
-                          wg * o_beta[i, o, 2] * jl * fo[2] * leo[2] / pll)
-                    if st == CONNECTED:  # the base's vertex, direction and shadow ray
-                        if ok:
-                            for c in range(3):
-                                sh_G[i, o, c] = co[c] - wg * cn[c]
+                    n_pbo[i, o] = bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wil)
+                    n_plo[i, o] = plo
+                    n_rj[i, o] = o_R[i, o] * jl
+                    for c in range(3):
+                        n_co[i, o, c] = o_beta[i, o, c] * jl * fo[c] * leo[c] / pll
+                    if st != TRACED:  # at the base's vertex: the base's shadow ray
+                        n_mode[i, o] = 2
                         continue
-                    if ok:
+                    n_mode[i, o] = 3
+                    oo, od, otmax = shadow_ray(y, ngy, tri_eps[py], wlo, disto, lt, lt_tri, tri_eps)
+                    if otmax > 0.0:
+                        o_sh[i, o] = True
+                        o_sh_tmax[i, o] = otmax
                         for c in range(3):
-                            sh_G[i, o, c] = -wg * cn[c]
-                    if co[0] > 0.0 or co[1] > 0.0 or co[2] > 0.0:
-                        oo, od, otmax = shadow_ray(y, ngy, tri_eps[py], wlo, disto, lt, lt_tri, tri_eps)
-                        if otmax > 0.0:
-                            o_sh[i, o] = True
-                            o_sh_tmax[i, o] = otmax
-                            for c in range(3):
-                                o_sh_o[i, o, c] = oo[c]
-                                o_sh_d[i, o, c] = od[c]
-                                o_sh_C[i, o, c] = co[c]
+                            o_sh_o[i, o, c] = oo[c]
+                            o_sh_d[i, o, c] = od[c]
 
         # The base's next direction (the path tracer's) and roulette
         wiw, wt, pdf, _, dlt, _, _ = sample_mixture(
@@ -588,6 +622,37 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         alive[k] = True
 
 
+@kernel
+def add_next_event(active, has_shadow, vis_b, sh_L, L, G, n_mode, n_cn, n_pl, n_pb, n_co, n_rj, n_plo, n_pbo, vis):
+    """Add the bounce's NEE once its shadow rays are traced: the base's value to L, and to each pair's
+    gradient w (vis_o C_o - vis_b C_b), w = pL^2 / (pL^2 + pB^2 + (R J_L)^2 (pL_o^2 + pB_o^2)), where a
+    blocked side's BSDF density is 0 (a BSDF sample cannot reach the light through the occluder).
+    Mode 1 (no partner): minus the base's own weighted value."""
+    for k in prange(active.shape[0]):
+        i = active[k]
+        vb = has_shadow[k] and vis_b[k]
+        if vb:
+            for c in range(3):
+                L[i, c] += sh_L[k, c]
+        for o in range(4):
+            mode = n_mode[i, o]
+            if mode == 0:
+                continue
+            if mode == 1:
+                if vb:
+                    for c in range(3):
+                        G[i, o, c] -= sh_L[k, c]
+                continue
+            vo = vb if mode == 2 else vis[i, o]
+            pl = n_pl[i]
+            pb = n_pb[i] if vb else 0.0
+            po = n_pbo[i, o] if vo else 0.0
+            rj = n_rj[i, o]
+            wg = pl * pl / (pl * pl + pb * pb + rj * rj * (n_plo[i, o] * n_plo[i, o] + po * po))
+            for c in range(3):
+                G[i, o, c] += wg * ((n_co[i, o, c] if vo else 0.0) - (n_cn[i, c] if vb else 0.0))
+
+
 _CAMERA = CameraSource()
 
 
@@ -604,6 +669,7 @@ def warm_up(ctx, buf, roughness):
                   surf.mat_type, surf.mat_param, roughness, hb.b_x, hb.b_prim, hb.b_wo, hb.b_wt, hb.b_pdf,
                   hb.b_delta, hb.b_rough, *hb.offset_state())
     _shade(ctx, buf, hb, idx, buf.ray_d[:0], (t, prim, b1, b2), CameraSource()._ps, roughness)
+    _add_next_event(buf, hb, idx)
 
 
 def _shade(ctx, buf, hb, active, rd, hits, ps, roughness):
@@ -611,9 +677,18 @@ def _shade(ctx, buf, hb, active, rd, hits, ps, roughness):
                  ctx.rr_depth, roughness, buf.beta, buf.L, buf.L_cam, buf.depth, buf.prev_pdf, buf.prev_delta,
                  buf.key, buf.aov, buf.aov_open, buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d,
                  buf.sh_tmax, buf.sh_L, buf.has_shadow, hb.b_x, hb.b_prim, hb.b_wo, hb.b_wt, hb.b_pdf,
-                 hb.b_delta, hb.b_rough, hb.sh_G, hb.G, hb.alive, hb.status, hb.beta, hb.R, hb.x, hb.prim,
-                 hb.wo, hb.pdf, hb.delta, hb.dist2, hb.rough, hb.hv, hb.trace, hb.hit_t, hb.hit_prim,
-                 hb.hit_b1, hb.hit_b2, hb.sh, hb.sh_o, hb.sh_d, hb.sh_tmax, hb.sh_C)
+                 hb.b_delta, hb.b_rough, hb.G, hb.alive, hb.status, hb.beta, hb.R, hb.x, hb.prim,
+                 hb.wo, hb.pdf, hb.delta, hb.dist2, hb.rough, hb.hv, hb.lights, hb.trace, hb.hit_t, hb.hit_prim,
+                 hb.hit_b1, hb.hit_b2, hb.sh, hb.sh_o, hb.sh_d, hb.sh_tmax, *_nee(hb))
+
+
+def _nee(hb):
+    return hb.n_cn, hb.n_pl, hb.n_pb, hb.n_mode, hb.n_co, hb.n_rj, hb.n_plo, hb.n_pbo, hb.vis
+
+
+def _add_next_event(buf, hb, active):
+    add_next_event(active, buf.has_shadow, hb.vis_b, buf.sh_L, buf.L, hb.G, hb.n_mode, hb.n_cn, hb.n_pl, hb.n_pb,
+                   hb.n_co, hb.n_rj, hb.n_plo, hb.n_pbo, hb.vis)
 
 
 def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness):
@@ -653,12 +728,12 @@ def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness):
         if ri.size:
             sl = active[ri]
             occ = accel.occluded(hb.ray_o[sl, ro_], hb.ray_d[sl, ro_], hb.tmax[sl, ro_])
-            hb.alive[sl[occ], ro_[occ]] = False
+            hb.status[sl[occ], ro_[occ]] = BLOCKED
             stats.shadow_rays += ri.size
         t0 = stats.tick("intersect", t0)
         _shade(ctx, buf, hb, active, rd, (t, prim, b1, b2), ps, roughness)
         t0 = stats.tick("shade", t0)
-        # Shadow rays: the base's, then the offsets' own
+        # Shadow rays: the base's, then the offsets' own; then the NEE terms with their weights
         kb = np.flatnonzero(buf.has_shadow[:na])
         si, so = np.nonzero(hb.sh[active])
         ss = active[si]
@@ -668,12 +743,11 @@ def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness):
             tmax = np.concatenate([buf.sh_tmax[kb], hb.sh_tmax[ss, so]])
             vis = ~accel.occluded(org, dirs, tmax)
             stats.shadow_rays += kb.size + si.size
-            vb, vo = vis[:kb.size], vis[kb.size:]
-            pb = active[kb[vb]]
-            buf.L[pb] += buf.sh_L[kb[vb]]
-            hb.G[pb] += hb.sh_G[pb]
-            hb.G[ss[vo], so[vo]] += hb.sh_C[ss[vo], so[vo]]
+            hb.vis_b[kb] = vis[:kb.size]
+            hb.vis[ss, so] = vis[kb.size:]
             t0 = stats.tick("occluded", t0)
+            _add_next_event(buf, hb, active)
+            t0 = stats.tick("shade", t0)
         keep = buf.alive[:na]
         m = int(np.count_nonzero(keep))
         buf.ray_o[:m] = buf.next_o[:na][keep]
