@@ -102,7 +102,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                (the base image), with weight recon_alpha on the base. The result's image is then
                the reconstruction, its variance the base image's, and result.buffers holds base,
                dx, dy (with variances), direct and indirect; stats time the passes and the solve
-               (time_solve). `callback` is not called between gpt's passes.
+               (time_solve). `callback` gets the base image's film after each of gpt's passes.
 
     The method runs its own schedule of passes (guide.schedule(session), tracer.session): BSDF
     sampling and guides that learn nothing render final passes alone; `grid` and `photon` run
@@ -243,7 +243,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
             reserve = gradient.solve_time_estimate(recon, crop[2], crop[3], recon_alpha) if time is not None else 0.0
             gradient.gradient_passes(ctx, buf, stats, gfilms, session.passes, spp=spp, time=time, t_start=t_start,
                                      reserve=reserve, before_wave=session._before_wave,
-                                     after_wave=session._after_wave, shift=shift, roughness=shift_roughness)
+                                     after_wave=session._after_wave, shift=shift, roughness=shift_roughness,
+                                     after_pass=lambda film: _gpt_after_pass(session, film))
         elif g is None:
             session.final_passes()
         else:
@@ -270,6 +271,12 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         aov_film.count += f.count
         aov_film.aov += f.aov
     return RenderResult(image.astype(np.float32), variance.astype(np.float32), aov_film.aovs(), st, session.final)
+
+
+def _gpt_after_pass(session, film):
+    """The callback after a gpt pass, with the samples per pixel done so far in the stats."""
+    session.sample0 = sum(p["spp"] for p in session.passes)
+    session.after_pass(film)
 
 
 def _gpt_result(gfilms, stats, snapshot, session, interrupted, recon, alpha):

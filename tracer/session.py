@@ -103,6 +103,11 @@ class Session:
             ctx.guide_state = g.state()
             entry["time_update"] = _time.perf_counter() - tl
         self.passes.append(entry)
+        self.after_pass(film)
+
+    def after_pass(self, film):
+        """Call the callback with the pass just appended to self.passes and `film`; Stop if it
+        returns False."""
         if self.callback is not None and self.callback(len(self.passes) - 1, film, self.snapshot()) is False:
             raise Stop
 

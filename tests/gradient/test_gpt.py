@@ -147,3 +147,18 @@ def test_albedo_is_taken_past_a_mirror_and_depth_is_normalised(tmp_path):
         assert (r.aovs["depth"] >= 2.0 - 1e-6).all()
     d = r.buffers["depth"]
     assert d.shape == (8, 8, 1) and d.min() >= 0.0 and np.isclose(d.max(), 1.0)
+
+
+def test_callback_sees_each_gradient_pass_and_can_stop():
+    """gpt calls render's callback after each pass with the base film and the stats so far; False
+    stops the render after that pass, and the reconstruction covers the passes done (1 + 2 spp)."""
+    seen = []
+
+    def cb(i, film, st):
+        seen.append((i, st["spp"], int(film.count.sum())))
+        return i < 1
+
+    r = tracer.render(_scene("cornell", 8, 8), spp=64, integrator="gpt", recon="l2", seed=1, callback=cb)
+    assert seen == [(0, 1, 64), (1, 3, 192)]
+    assert r.stats["spp"] == 3 and r.stats["samples"] == 3 * 64
+    assert_clean(r)

@@ -86,12 +86,13 @@ _SHIFTED = tuple(CameraSource(shift=o) for o in OFFSETS)
 
 
 def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, t_start=None, reserve=0.0,
-                    before_wave=None, after_wave=None, shift="replay", roughness=0.001):
+                    before_wave=None, after_wave=None, shift="replay", roughness=0.001, after_pass=None):
     """Render passes of 1, 2, 4, ... spp into `films` (GradientFilms) until `spp` in all, or, with
     a time budget, while the next pass fits in `time - reserve` seconds after t_start; appends
     {spp, time, kind} to `passes` after each. before_wave(n) and after_wave(n) are called around
     each wave of n base paths (before_wave may raise to stop: the films keep every finished wave).
-    shift: "replay" (here) or "hybrid" (hybrid.py, reconnecting above `roughness`)."""
+    shift: "replay" (here) or "hybrid" (hybrid.py, reconnecting above `roughness`). after_pass(film)
+    is called after each pass with the base film (it may raise to stop)."""
     if shift == "hybrid":
         from . import hybrid
 
@@ -126,5 +127,7 @@ def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, t_start
             if after_wave is not None:
                 after_wave(m)
         passes.append({"spp": pass_spp, "time": _time.perf_counter() - tp, "kind": "gradient"})
+        if after_pass is not None:
+            after_pass(films.base)
         done += pass_spp
         pass_spp *= 2
