@@ -31,14 +31,14 @@ import time
 import numpy as np
 from numba import prange
 
-from . import bsdfs
 from ._jit import kernel
 from .guiding.records import finalize_records
 from .guiding.spatial import locate
 from .lights import ENV_NONE
 from .rng import DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, draw
 from .sampling import dot, frame, to_local, triangle_point
-from .shading import emitted_env, emitted_surface, next_event, offset_point, russian_roulette, sample_mixture
+from .shading import (emitted_env, emitted_surface, next_event, offset_point, russian_roulette, sample_mixture,
+                      write_aovs)
 from .splitting import merge_copies, split_wave
 from .wave import add_unoccluded, compact, sanitize
 
@@ -120,19 +120,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 for c in range(3):
                     r_L0[prev_rec[i], c] += b[c] * le[c] * x_le
 
-        # AOVs: normal facing the camera and distance at the first hit; albedo at the first vertex
-        # that is not a delta BSDF (until then, the delta BSDF's own)
-        delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
-        if dk == 0:
-            sgn = 1.0 if cos_o >= 0.0 else -1.0
-            for c in range(3):
-                aov[i, 3 + c] = sgn * ng[c]
-            aov[i, 6] = t[k]
-        if aov_open[i]:
-            al = bsdfs.bsdf_albedo(mat_type, mat_param, m)
-            for c in range(3):
-                aov[i, c] = al[c]
-            aov_open[i] = delta
+        delta = write_aovs(mat_type, mat_param, m, i, dk, cos_o, ng, t[k], aov, aov_open)
 
         # Continue past this vertex?
         if max_depth >= 0 and dk + 1 >= max_depth:

@@ -83,6 +83,26 @@ def emitted_surface(lt, p, dist2, cos_o, depth, prev_pdf, prev_delta):
 
 
 @jit(inline="always")
+def write_aovs(mat_type, mat_param, m, i, depth, cos_o, ng, dist, aov, aov_open):
+    """The AOVs of path i at a vertex of material m (its depth-th bounce, normal ng, arrived at
+    distance dist with cos_o to ng): normal facing the camera and distance at the first hit; albedo
+    at the first vertex that is not a delta BSDF (until then, the delta BSDF's own). Returns
+    whether m is a delta BSDF."""
+    delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
+    if depth == 0:
+        sgn = 1.0 if cos_o >= 0.0 else -1.0
+        for c in range(3):
+            aov[i, 3 + c] = sgn * ng[c]
+        aov[i, 6] = dist
+    if aov_open[i]:
+        al = bsdfs.bsdf_albedo(mat_type, mat_param, m)
+        for c in range(3):
+            aov[i, c] = al[c]
+        aov_open[i] = delta
+    return delta
+
+
+@jit(inline="always")
 def mixture_pdf(gs, slot, a, pb, wiw):
     """Density of world direction wiw under the mixture a p_bsdf + (1 - a) p_guide, given the
     BSDF's own density pb of it (pdfMat); pb where a is 1."""

@@ -9,6 +9,7 @@ from scipy import stats as sstats
 import tracer
 from tracer.cli import main
 from tracer.errors import SettingsError
+from tests.gradient.zscores import gradient_z
 from tests.stats import assert_clean, z_critical
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -41,25 +42,7 @@ def test_gradients_are_the_differences_of_the_path_tracers_pixels(name, shift):
     independent path render (another seed), the per-pixel z-scores have sum of squares below the
     chi-square quantile and mean within its z-bound (Sidak over 4 tests). Detects a sign error, a
     pixel off by one or a factor 2 (the -x side's sign flipped: sum z^2 ~ 4500 over 543 pixels)."""
-    scene = _scene(name, 24, 24)
-    g = tracer.render(scene, spp=64, integrator="gpt", recon="none", seed=11, max_depth=5, shift=shift)
-    p = tracer.render(scene, spp=512, seed=12, max_depth=5)
-    assert_clean(g)
-    img = p.image.astype(np.float64).mean(axis=2)
-    var = p.variance.astype(np.float64).mean(axis=2)
-    lit = g.buffers["direct"].astype(np.float64).max(axis=2) > 0.0
-    for key, axis in (("dx", 1), ("dy", 0)):
-        d = g.buffers[key].astype(np.float64).mean(axis=2)
-        dv = g.buffers[key + "_variance"].astype(np.float64).mean(axis=2)
-        if axis == 1:
-            diff, dvar = img[:, 1:] - img[:, :-1], var[:, 1:] + var[:, :-1]
-            d, dv, ok = d[:, :-1], dv[:, :-1], ~(lit[:, 1:] | lit[:, :-1])
-        else:
-            diff, dvar = img[1:] - img[:-1], var[1:] + var[:-1]
-            d, dv, ok = d[:-1], dv[:-1], ~(lit[1:] | lit[:-1])
-        tot = dv + dvar
-        ok &= tot > 0
-        z = (d - diff)[ok] / np.sqrt(tot[ok])
+    for key, z in gradient_z(name, 24, 64, 512, shift=shift):
         m = z.size
         assert m > 200
         chi = float(np.sum(z * z))

@@ -1,17 +1,14 @@
 """The hybrid shift's mappings (tracer.gradient.hybrid): inverses, Jacobians, failed shifts."""
 import math
-import os
 
 import numpy as np
 import pytest
 from scipy import stats as sstats
 
-import tracer
 from tracer import bsdfs
 from tracer.gradient.hybrid import half_vector_shift, reconnection
-from tests.stats import assert_clean, z_critical
-
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from tests.gradient.zscores import gradient_z
+from tests.stats import z_critical
 
 # material 0: rough conductor, 1: rough dielectric (ior 1.5), 2: plastic, 3: mirror, 4: smooth glass
 MAT_TYPE = np.array([bsdfs.CONDUCTOR, bsdfs.ROUGH_DIELECTRIC, bsdfs.PLASTIC, bsdfs.MIRROR, bsdfs.DIELECTRIC], np.int32)
@@ -147,32 +144,6 @@ def test_a_delta_lobe_shifts_only_to_a_delta_lobe():
     assert not half_vector_shift(MAT_TYPE, MAT_PARAM, 4, 4, wo_b, tuple(wi_b), _unit([0.9, 0.0, -0.3]), True)[0]
 
 
-def _gradient_z(name, size, spp, ref_spp, **kw):
-    """Per-pixel z-scores of dx and dy (where no emitter is seen directly) against the differences of
-    an independent path render, and the chi-square and mean-z bounds (Sidak over 4 tests)."""
-    scene = tracer.load_scene(os.path.join(ROOT, "scenes", name, f"{name}.obj"), width=size, height=size)
-    g = tracer.render(scene, spp=spp, integrator="gpt", recon="none", seed=11, max_depth=5, **kw)
-    p = tracer.render(scene, spp=ref_spp, seed=12, max_depth=5)
-    assert_clean(g)
-    img = p.image.astype(np.float64).mean(axis=2)
-    var = p.variance.astype(np.float64).mean(axis=2)
-    lit = g.buffers["direct"].astype(np.float64).max(axis=2) > 0.0
-    out = []
-    for key, axis in (("dx", 1), ("dy", 0)):
-        d = g.buffers[key].astype(np.float64).mean(axis=2)
-        dv = g.buffers[key + "_variance"].astype(np.float64).mean(axis=2)
-        if axis == 1:
-            diff, dvar = img[:, 1:] - img[:, :-1], var[:, 1:] + var[:, :-1]
-            d, dv, ok = d[:, :-1], dv[:, :-1], ~(lit[:, 1:] | lit[:, :-1])
-        else:
-            diff, dvar = img[1:] - img[:-1], var[1:] + var[:-1]
-            d, dv, ok = d[:-1], dv[:-1], ~(lit[1:] | lit[:-1])
-        tot = dv + dvar
-        ok &= tot > 0
-        out.append((key, (d - diff)[ok] / np.sqrt(tot[ok])))
-    return out
-
-
 @pytest.mark.parametrize("name,roughness", [("ajar", 0.001), ("caustic", 0.001), ("cornell", math.inf)])
 def test_hybrid_gradients_are_unbiased(name, roughness):
     """dx, dy of the hybrid shift at 2048 spp against a 16384-spp path render (16x16): sum of z^2
@@ -184,7 +155,7 @@ def test_hybrid_gradients_are_unbiased(name, roughness):
     - `cornell` with no vertex rough enough to reconnect: half-vector copies everywhere, so the pairs
       take no NEE and weigh emission over the BSDF techniques alone (NEE reconnecting while the
       BSDF sample is copied would pair a path with two different partners)."""
-    for key, z in _gradient_z(name, 16, 2048, 16384, shift="hybrid", shift_roughness=roughness):
+    for key, z in gradient_z(name, 16, 2048, 16384, shift="hybrid", shift_roughness=roughness):
         m = z.size
         assert m > 150
         chi = float(np.sum(z * z))

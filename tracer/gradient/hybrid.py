@@ -52,7 +52,7 @@ from ..lights import ENV_NONE, env_pdf, env_radiance, triangle_emission, triangl
 from ..rng import DIM_PIXEL, DIR, LIGHT, LIGHT_POS, LOBE, RR, bounce_dim, draw
 from ..sampling import dot, frame, to_local, to_world, triangle_point
 from ..shading import emitted_env, emitted_surface, light_sample_at, offset_point, russian_roulette, sample_mixture
-from ..shading import shadow_ray
+from ..shading import shadow_ray, write_aovs
 from ..sources import CameraSource
 from ..wave import sanitize
 
@@ -477,20 +477,8 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         if p < 0:
             continue
 
-        # AOVs (as the path tracer's)
         m = tri_material[p]
-        cos_o = -dot(wray, ng)
-        delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
-        if dk == 0:
-            sgn = 1.0 if cos_o >= 0.0 else -1.0
-            for c in range(3):
-                aov[i, 3 + c] = sgn * ng[c]
-            aov[i, 6] = t[k]
-        if aov_open[i]:
-            al = bsdfs.bsdf_albedo(mat_type, mat_param, m)
-            for c in range(3):
-                aov[i, c] = al[c]
-            aov_open[i] = delta
+        delta = write_aovs(mat_type, mat_param, m, i, dk, -dot(wray, ng), ng, t[k], aov, aov_open)
         if max_depth >= 0 and dk + 1 >= max_depth:
             continue
         s, tt = frame(ng)
