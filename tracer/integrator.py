@@ -38,7 +38,7 @@ from .lights import ENV_NONE
 from .rng import DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, draw
 from .sampling import dot, frame, to_local, triangle_point
 from .shading import (emitted_env, emitted_surface, next_event, offset_point, russian_roulette, sample_mixture,
-                      write_aovs)
+                      write_aovs, write_shadow)
 from .splitting import merge_copies, split_wave
 from .wave import add_unoccluded, compact, sanitize
 
@@ -144,12 +144,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 tri_eps, draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
                 draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)))
             if ok:
-                for c in range(3):
-                    sh_o[k, c] = so[c]
-                    sh_d[k, c] = sd[c]
-                    sh_L[k, c] = contrib[c]
-                sh_tmax[k] = tmax
-                has_shadow[k] = True
+                write_shadow(k, so, sd, tmax, contrib, sh_o, sh_d, sh_tmax, sh_L, has_shadow)
 
         # Sample the continuation from the mixture: the guide with probability 1 - a, else the BSDF
         u_strategy = draw(ps, kk, i, bounce_dim(dk, STRATEGY)) if a < 1.0 else 1.0

@@ -103,6 +103,17 @@ def write_aovs(mat_type, mat_param, m, i, depth, cos_o, ng, dist, aov, aov_open)
 
 
 @jit(inline="always")
+def write_shadow(k, so, sd, tmax, contrib, sh_o, sh_d, sh_tmax, sh_L, has_shadow):
+    """Store entry k's shadow ray (origin, unit direction, tmax) and the value it adds if unblocked."""
+    for c in range(3):
+        sh_o[k, c] = so[c]
+        sh_d[k, c] = sd[c]
+        sh_L[k, c] = contrib[c]
+    sh_tmax[k] = tmax
+    has_shadow[k] = True
+
+
+@jit(inline="always")
 def mixture_pdf(gs, slot, a, pb, wiw):
     """Density of world direction wiw under the mixture a p_bsdf + (1 - a) p_guide, given the
     BSDF's own density pb of it (pdfMat); pb where a is 1."""

@@ -49,10 +49,10 @@ from .._jit import jit, kernel
 from ..camera import camera_ray
 from ..integrator import MAX_BOUNCES
 from ..lights import ENV_NONE, env_pdf, env_radiance, triangle_emission, triangle_light_pdf
-from ..rng import DIM_PIXEL, DIR, LIGHT, LIGHT_POS, LOBE, RR, bounce_dim, draw
+from ..rng import DIM_PIXEL, DIR, LIGHT, LIGHT_POS, LOBE, RR, bounce_dim, draw, no_primary_samples
 from ..sampling import dot, frame, to_local, to_world, triangle_point
 from ..shading import emitted_env, emitted_surface, light_sample_at, offset_point, russian_roulette, sample_mixture
-from ..shading import shadow_ray, write_aovs
+from ..shading import shadow_ray, write_aovs, write_shadow
 from ..sources import CameraSource
 from ..wave import sanitize
 
@@ -504,12 +504,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 ok = tmax > 0.0
                 contrib = (0.0, 0.0, 0.0)
             if ok:
-                for c in range(3):
-                    sh_o[k, c] = so[c]
-                    sh_d[k, c] = sd[c]
-                    sh_L[k, c] = contrib[c]
-                sh_tmax[k] = tmax
-                has_shadow[k] = True
+                write_shadow(k, so, sd, tmax, contrib, sh_o, sh_d, sh_tmax, sh_L, has_shadow)
             if valid:
                 n_pl[i] = pll
                 n_pb[i] = pbb
@@ -650,13 +645,13 @@ def warm_up(ctx, buf, roughness):
     idx = np.zeros(0, np.int64)
     t, prim, b1, b2 = ctx.accel.intersect(buf.ray_o[:0], buf.ray_d[:0])
     surf = ctx.surfaces
-    start_offsets(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, CameraSource()._ps,
+    start_offsets(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, no_primary_samples(),
                   buf.key[:0], buf.pix[:0], hb.ray_o, hb.ray_d, hb.alive, hb.status, hb.beta, hb.R, hb.wo, hb.hv,
                   hb.trace, hb.reconn, hb.G)
     shift_offsets(idx, t, prim, b1, b2, buf.ray_d[:0], surf.tri, surf.normal, surf.material, surf.eps,
                   surf.mat_type, surf.mat_param, roughness, hb.b_x, hb.b_prim, hb.b_wo, hb.b_wt, hb.b_pdf,
                   hb.b_delta, hb.b_rough, *hb.offset_state())
-    _shade(ctx, buf, hb, idx, buf.ray_d[:0], (t, prim, b1, b2), CameraSource()._ps, roughness)
+    _shade(ctx, buf, hb, idx, buf.ray_d[:0], (t, prim, b1, b2), no_primary_samples(), roughness)
     _add_next_event(buf, hb, idx)
 
 
