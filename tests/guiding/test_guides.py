@@ -25,10 +25,11 @@ GUIDES = [g for g in guide_names() if g != "bsdf"]
 # every guide at its defaults (mixing weights of least second moment), and the paper's eq. 14
 # weights (which change how often each strategy is drawn, so they must leave the mean alone too)
 # and paths split where they become overweight (split 1.5: often, so that the test sees it), and a
-# narrow weight window (which splits and roulettes often)
+# narrow weight window (which splits and roulettes often), and maps reconstructed by the network
 VARIANTS = [(g, {}) for g in GUIDES] + [("photon", {"mixing": "eq14"}), ("photon", {"light_guiding": 0.5}),
                                         ("photon", {"split": 1.5, "window": 0.0}),
-                                        ("photon", {"window": 1.0, "window_low": 0.5})]
+                                        ("photon", {"window": 1.0, "window_low": 0.5}),
+                                        ("photon", {"reconstruct": "cnn"})]
 CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96)]
 N_TESTS = len(CASES) * len(VARIANTS) * 3
 

@@ -95,7 +95,7 @@ def test_gaussian_keeps_mass_and_pullpush_fills_holes():
     pp = make_reconstructor("pullpush", levels=4).reconstruct(np.where(mask, noisy, 0), mask.astype(np.float32), mask)
     np.testing.assert_allclose(pp[mask], noisy[mask], rtol=1e-6)  # data kept
     assert (pp[~mask] > 0).all()  # holes filled
-    with pytest.raises(SettingsError, match="valid: gaussian, none, pullpush"):
+    with pytest.raises(SettingsError, match="valid: cnn, gaussian, none, pullpush"):
         make_reconstructor("median")
 
 

@@ -10,7 +10,8 @@ Both follow Algorithm 1 of Zhu et al. 2021 (Photon-Driven Neural Reconstruction 
   make the voxels they visit valid and feed each voxel's mixing weight (eq. 14). Then the data of
   the iteration is binned into the valid voxels, voxels holding more than c sqrt(2^t) samples are
   split at the middle plane (at most 3 new levels), and every valid voxel's map is reconstructed
-  (normalise, then the `reconstruct` filter) and turned into a sampling table.
+  (normalise, then the `reconstruct` filter; with `cnn`, only the maps that received data since
+  the last update) and turned into a sampling table.
 - `photon`: 2^t N_p photons per iteration (N_p = `photons_per_pixel` x pixels), their power
   binned by arrival direction (eq. 10); power maps accumulate over the iterations. With
   `light_guiding` p > 0 the photons are guided toward the camera's vertices (the paper's guided
@@ -73,8 +74,9 @@ COMMON = {
     "resolution": 16,  # cells along the diagonal of the pilot bounds
     "map_width": 64,  # phi bins
     "map_height": 32,  # cos(theta) bins
-    "reconstruct": "gaussian",  # gaussian | pullpush | none
-    "sigma": 1.0,  # gaussian: standard deviation in bins
+    "reconstruct": "gaussian",  # gaussian | pullpush | none | cnn (photon only: the trained network)
+    "sigma": 1.0,  # gaussian (and cnn's dense maps): standard deviation in bins
+    "cnn_max_photons": 1000.0,  # cnn: maps holding at least this many photons take the gaussian filter
     "alpha_min": 0.2,
     "alpha_max": 0.8,
     "mis_min_samples": 32,  # Q_thr of eq. 14
@@ -166,6 +168,7 @@ class HistogramGuide(Guide):
 
     name = "histogram"
     learns = True
+    neural_maps = False  # whether the maps are photon maps, which the network was trained on
     DEFAULTS = {}
 
     def __init__(self, **settings):
@@ -196,8 +199,17 @@ class HistogramGuide(Guide):
         if s["reconstruct"] not in RECONSTRUCTORS:
             raise SettingsError(f"guide setting reconstruct: unknown {s['reconstruct']!r}; valid: "
                                 + ", ".join(sorted(RECONSTRUCTORS)))
-        extra = {"sigma": _float("sigma", s["sigma"], 0.0, 64.0)} if s["reconstruct"] == "gaussian" else {}
+        extra = {}
+        if s["reconstruct"] in ("gaussian", "cnn"):
+            extra["sigma"] = _float("sigma", s["sigma"], 0.0, 64.0)
+        if s["reconstruct"] == "cnn":
+            extra["max_photons"] = _float("cnn_max_photons", s["cnn_max_photons"], 0.0)
         self.reconstructor = make_reconstructor(s["reconstruct"], **extra)
+        if self.reconstructor.neural:
+            if not self.neural_maps:
+                raise SettingsError(f"guide {self.name!r}: reconstruct {s['reconstruct']!r} is trained on photon maps; "
+                                    "it goes with guide photon")
+            self.reconstructor.check_map(self.map_height, self.map_width)
         self.settings = s
         self.grid = None
 
@@ -211,7 +223,9 @@ class HistogramGuide(Guide):
         self._pilot = []
         self.time_learning = 0.0  # observing records, photons, splits (update's first part)
         self.time_update = 0.0  # rebuilding the maps between passes: reconstruct, tables, weights
-        self.time_inference = 0.0  # network inference: none in these guides
+        self.time_inference = 0.0  # network inference (reconstruct cnn); not in time_update
+        self.reconstructor.time_inference = 0.0
+        self.reconstructor.maps_inferred = 0
         self.peak_memory = 0
         self.info = {"photons": 0, "deposits": 0, "photon_rays": 0, "vertices": 0}
         self._mom = self._mom_n = None
@@ -253,6 +267,7 @@ class HistogramGuide(Guide):
             self._iterate_data()
             self.grid.split_mid(self.c * math.sqrt(2.0 ** self.iteration), self.max_levels)
         t1 = time.perf_counter()
+        inf0 = self.time_inference
         self.time_learning += t1 - t0
         if self.grid is not None:
             self._reconstruct()
@@ -260,7 +275,7 @@ class HistogramGuide(Guide):
             self._after_reconstruct()
             self._state = self.grid.state()
             self.peak_memory = max(self.peak_memory, self.memory_bytes())
-        self.time_update += time.perf_counter() - t1
+        self.time_update += time.perf_counter() - t1 - (self.time_inference - inf0)
         self.iteration += 1
 
     def fixed_state(self, sampling_map):
@@ -287,7 +302,8 @@ class HistogramGuide(Guide):
         g = self.grid
         out = dict(self.info)
         out.update({"name": self.name, "iterations_done": self.iteration, "settings": dict(self.settings),
-                    "reconstruct": self.reconstructor.describe()})
+                    "reconstruct": self.reconstructor.describe(),
+                    "maps_inferred": int(getattr(self.reconstructor, "maps_inferred", 0))})
         if g is not None:
             leaves = g.leaves()
             out.update({"cells": int(g.n_cells), "nodes": int(g.n_nodes), "voxels": int(leaves.size),
@@ -331,10 +347,19 @@ class HistogramGuide(Guide):
         slots, maps = self._normalised_maps(g.power)
         if maps is None:
             return
-        counts = g.count[slots].reshape(maps.shape)
-        rec = self.reconstructor.reconstruct(maps, counts, counts > 0)
+        rc = self.reconstructor
+        if rc.neural:  # only the maps that received data since the last update
+            changed = np.any(g.count[slots] != g.pcount[slots], axis=1)
+            slots, maps = slots[changed], maps[changed]
+            if slots.size == 0:
+                return
+        shape = maps.shape
+        counts = g.count[slots].reshape(shape)
+        rec = rc.reconstruct(maps, counts, counts > 0, g.prev[slots].reshape(shape), g.pcount[slots].reshape(shape))
+        self.time_inference = rc.time_inference
         g.set_maps(slots, build_tables(rec))
         g.prev[slots] = maps.reshape(slots.size, -1)
+        g.pcount[slots] = counts.reshape(slots.size, -1)
 
     def _choose_alpha(self):
         """`mixing variance`: each voxel with mis_min_samples vertices this iteration takes the
@@ -402,6 +427,7 @@ class PhotonGuide(HistogramGuide):
     """`--guide photon`: maps from photon power binned by arrival direction (eq. 10)."""
 
     name = "photon"
+    neural_maps = True
     # why each default: docs/guiding.md, "Defaults and where they were measured"
     DEFAULTS = dict(COMMON, split_c=4000.0, sigma=1.0, photons_per_pixel=2.0, light_guiding=0.0, split=2.0, window=3.0,
                     window_low=0.05)
@@ -450,7 +476,9 @@ class PhotonGuide(HistogramGuide):
         if maps is None:
             return
         mask = maps > 0.0
-        rec = self.reconstructor.reconstruct(maps, mask.astype(np.float32), mask)
+        rc = self.reconstructor if not self.reconstructor.neural else make_reconstructor("gaussian",
+                                                                                          sigma=self.settings["sigma"])
+        rec = rc.reconstruct(maps, mask.astype(np.float32), mask)  # the network knows radiance maps only
         g.set_maps(slots, build_tables(rec), importance=True)
 
     def _iterate_data(self):

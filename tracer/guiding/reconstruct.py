@@ -2,14 +2,14 @@
 
 Every reconstructor implements one method,
 
-    reconstruct(maps, counts, masks) -> maps
+    reconstruct(maps, counts, masks, prev=None, prev_counts=None) -> maps
 
 on a batch of S voxels at once: `maps` (S, n_theta, n_phi) float32, each map normalised to sum
 to 1 (or all zero); `counts` (S, n_theta, n_phi) float32, how many samples (photons or path
-vertices) landed in each bin; `masks` (S, n_theta, n_phi) bool, bins that hold data. It returns
-non-negative maps of the same shape (any scale: the caller normalises). These are the inputs of
-the paper's network (its S_t, P_t and B_t), so the neural reconstruction of a later issue plugs in
-here, registered in RECONSTRUCTORS.
+vertices) landed in each bin; `masks` (S, n_theta, n_phi) bool, bins that hold data; `prev` and
+`prev_counts` the same voxels' maps and counts at the previous update (None: not known). It
+returns non-negative maps of the same shape (any scale: the caller normalises). These are the
+inputs of the paper's network (S_t, S_{t-1}, P_t, P_{t-1}, B_t of equation 11).
 
 Maps are full-sphere cylindrical: rows are z = cos(theta), columns are phi (periodic). The
 classical filters here respect that: phi wraps, z is mirrored at the poles.
@@ -18,7 +18,14 @@ classical filters here respect that: phi wraps, z is mirrored at the poles.
 - `pullpush`: pull-push (Gortler et al. 1996): empty bins are filled from a pyramid of
   count-weighted averages; bins with data keep their value.
 - `none`: the histogram as it is.
+- `cnn`: the photon map network (tracer.guiding.photon_cnn) with the shipped weights
+  (tracer/weights/photon_cnn.*), trained offline by learn/ on procedural scenes, for the maps
+  holding fewer than `max_photons` photons (the Gaussian filter for the others); one batched
+  torch pass per update, under torch.inference_mode(). Its time is kept in `time_inference`.
 """
+import time
+
+import numba
 import numpy as np
 from numba import prange
 
@@ -56,8 +63,10 @@ def _blur(maps, offs, w, out):
 
 class Reconstructor:
     name = "none"
+    neural = False
+    time_inference = 0.0  # seconds spent in network inference (neural reconstructors)
 
-    def reconstruct(self, maps, counts, masks):
+    def reconstruct(self, maps, counts, masks, prev=None, prev_counts=None):
         return maps
 
     def describe(self):
@@ -78,7 +87,7 @@ class Gaussian(Reconstructor):
         w = np.exp(-0.5 * (x / max(self.sigma, 1e-12)) ** 2) if self.sigma > 0 else (x == 0).astype(float)
         return x.astype(int), (w / w.sum()).astype(np.float32)
 
-    def reconstruct(self, maps, counts, masks):
+    def reconstruct(self, maps, counts, masks, prev=None, prev_counts=None):
         offs, w = self._taps()
         if offs.size == 1:
             return maps
@@ -98,7 +107,7 @@ class PullPush(Reconstructor):
         if self.levels < 1:
             raise SettingsError(f"pullpush reconstruction needs levels >= 1, got {levels!r}")
 
-    def reconstruct(self, maps, counts, masks):
+    def reconstruct(self, maps, counts, masks, prev=None, prev_counts=None):
         vals = [maps.astype(np.float64)]
         wts = [masks.astype(np.float64)]
         for _ in range(self.levels):  # pull: 2x2 weighted averages, weights capped at 1
@@ -120,7 +129,72 @@ class PullPush(Reconstructor):
         return f"pullpush(levels={self.levels})"
 
 
-RECONSTRUCTORS = {"gaussian": Gaussian, "pullpush": PullPush, "none": Reconstructor}
+class CNN(Reconstructor):
+    """The photon map network: S_d = F(S_t, S_{t-1}, P_t, P_{t-1}, B_t), for maps holding fewer than
+    `max_photons` photons; denser maps take the Gaussian filter of `sigma` bins, within 3.4% of the
+    network's L1 there where the training data reach (docs/photon_cnn.md) and far cheaper. Loads the shipped weights on first use (or `weights`, a folder holding
+    photon_cnn.pt and .json)."""
+
+    name = "cnn"
+    neural = True
+
+    def __init__(self, weights=None, max_photons=1000.0, sigma=1.0, batch=64):
+        if not (max_photons >= 0.0):
+            raise SettingsError(f"cnn reconstruction needs max_photons >= 0, got {max_photons!r}")
+        self.weights = weights
+        self.max_photons = float(max_photons)
+        self.dense = Gaussian(sigma)
+        self.batch = int(batch)
+        self.model = self.manifest = None
+        self.time_inference = 0.0
+        self.maps_inferred = 0
+
+    def load(self):
+        if self.model is None:
+            from . import photon_cnn
+
+            try:
+                self.model, self.manifest = (photon_cnn.load() if self.weights is None
+                                             else photon_cnn.load(folder=self.weights))
+            except FileNotFoundError as e:
+                raise SettingsError(f"reconstruction cnn: {e}") from None
+        return self.model
+
+    def check_map(self, n_theta, n_phi):
+        """The network was trained on one map size: others are an error."""
+        self.load()
+        want = tuple(self.manifest["map"])
+        if (n_theta, n_phi) != want:
+            raise SettingsError(f"reconstruction cnn was trained on {want[0]}x{want[1]} maps (map_height x "
+                                f"map_width); got {n_theta}x{n_phi}")
+
+    def reconstruct(self, maps, counts, masks, prev=None, prev_counts=None):
+        import torch
+
+        from . import photon_cnn
+
+        model = self.load()
+        out = np.empty(maps.shape, np.float32)
+        sparse = counts.reshape(counts.shape[0], -1).sum(axis=1) < self.max_photons
+        if not sparse.all():
+            d = ~sparse
+            out[d] = self.dense.reconstruct(maps[d], counts[d], masks[d])
+        if sparse.any():
+            t0 = time.perf_counter()
+            torch.set_num_threads(max(1, numba.get_num_threads()))
+            take = (lambda a: None if a is None else a[sparse])
+            x = photon_cnn.features(maps[sparse], counts[sparse], take(prev), take(prev_counts))
+            out[sparse] = photon_cnn.infer(model, x, self.batch)
+            self.time_inference += time.perf_counter() - t0
+            self.maps_inferred += int(sparse.sum())
+        return out
+
+    def describe(self):
+        return (f"cnn({self.weights or 'shipped weights'}, max_photons={self.max_photons:g}, "
+                f"dense: {self.dense.describe()})")
+
+
+RECONSTRUCTORS = {"gaussian": Gaussian, "pullpush": PullPush, "none": Reconstructor, "cnn": CNN}
 
 
 def make_reconstructor(name, **settings):

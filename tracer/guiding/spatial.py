@@ -256,8 +256,8 @@ def _splat_importance(node, strategy, prev, x, n_theta, n_phi, data_slot, ipower
         ipower[s, direction_bin((d0 / ln, d1 / ln, d2 / ln), n_theta, n_phi)] += 1.0
 
 
-# per data slot: histogram, counts, previous map, sampling tables; the same for importance maps
-SLOT_ARRAYS = ("power", "count", "prev", "rowcum", "dens", "wsum", "pscale", "ipower", "irowcum", "idens", "iwsum",
+# per data slot: histogram, counts, previous map and counts, sampling tables; the same for importance maps
+SLOT_ARRAYS = ("power", "count", "prev", "pcount", "rowcum", "dens", "wsum", "pscale", "ipower", "irowcum", "idens", "iwsum",
                "ipscale")
 
 
@@ -306,6 +306,7 @@ class HierarchicalGrid:
         self.power = np.zeros((scap, self.K), np.float32)
         self.count = np.zeros((scap, self.K), np.float32)
         self.prev = np.zeros((scap, self.K), np.float32)  # the previous iteration's normalised map
+        self.pcount = np.zeros((scap, self.K), np.float32)  # ... and its counts
         self.rowcum = np.zeros((scap, self.n_theta + 1), np.uint32)
         self.dens = np.zeros((scap, self.K), np.uint16)
         self.wsum = np.ones(scap)
@@ -491,6 +492,7 @@ class HierarchicalGrid:
         if s >= 0:  # children inherit the data halved and the map; the parent keeps nothing
             self.power[s] *= 0.5
             self.count[s] *= 0.5
+            self.pcount[s] *= 0.5
             self.ipower[s] *= 0.5
             self.data_slot[node] = -1
             self.data_slot[c] = s

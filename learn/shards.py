@@ -1,0 +1,79 @@
+"""Datasets as independent shards, one per scene seed, generated in parallel through Dask.
+
+`run_shards(make, seeds, out_dir, ...)` calls `make(seed, path)` for every seed whose shard
+`out_dir/shard_<seed>.npz` does not exist yet (finished shards are skipped, so a killed run
+resumes where it stopped). `make` must write the file through `save_npz` (temporary file, then
+renamed into place), so a shard is either whole or absent. Shards run on a Dask LocalCluster on
+this machine (one single-threaded worker process per core by default), or on an existing
+cluster with `scheduler="tcp://host:port"`: the same code path either way. A progress bar counts
+finished shards.
+"""
+import contextlib
+import hashlib
+import os
+import time
+
+import numpy as np
+
+
+def shard_path(out_dir, seed):
+    return os.path.join(out_dir, f"shard_{int(seed):05d}.npz")
+
+
+def save_npz(path, **arrays):
+    """np.savez_compressed into `path` through a temporary file renamed into place."""
+    tmp = f"{path}.tmp{os.getpid()}.npz"
+    try:
+        np.savez_compressed(tmp, **arrays)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def list_shards(out_dir):
+    """Paths of the finished shards in out_dir, by seed."""
+    if not os.path.isdir(out_dir):
+        return []
+    return sorted(os.path.join(out_dir, f) for f in os.listdir(out_dir)
+                  if f.startswith("shard_") and f.endswith(".npz") and ".tmp" not in f)
+
+
+def _work(make, seed, path, threads):
+    """One shard in a worker: the process's Numba threads capped at `threads` first."""
+    import numba
+
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    t0 = time.perf_counter()
+    make(seed, path)
+    return seed, time.perf_counter() - t0
+
+
+def run_shards(make, seeds, out_dir, workers=None, scheduler=None, threads_per_worker=1, progress=True):
+    """Generate the missing shards of `seeds` into out_dir; returns {seed: seconds} of those run.
+    `make(seed, path)` must be importable by the workers (a module-level function)."""
+    from dask.distributed import Client, LocalCluster, as_completed
+    from tqdm import tqdm
+
+    os.makedirs(out_dir, exist_ok=True)
+    todo = [int(s) for s in seeds if not os.path.exists(shard_path(out_dir, s))]
+    if not todo:
+        return {}
+    tag = hashlib.sha1(os.path.abspath(out_dir).encode()).hexdigest()[:8]  # keys unique per dataset
+    with contextlib.ExitStack() as stack:
+        if scheduler is None:
+            n = workers or os.cpu_count() or 1
+            cluster = stack.enter_context(LocalCluster(n_workers=min(n, len(todo)), threads_per_worker=1,
+                                                       processes=True, dashboard_address=None, silence_logs=40))
+            client = stack.enter_context(Client(cluster))
+        else:
+            client = stack.enter_context(Client(scheduler))
+        futs = [client.submit(_work, make, s, shard_path(out_dir, s), threads_per_worker, key=f"shard-{tag}-{s}",
+                              pure=False) for s in todo]
+        bar = stack.enter_context(tqdm(total=len(todo), desc="shards", unit="shard", disable=not progress))
+        done = {}
+        for fut in as_completed(futs):
+            seed, secs = fut.result()
+            done[seed] = secs
+            bar.update(1)
+    return done
