@@ -37,9 +37,8 @@ def _trace_into(ctx, gs, node_slot, n, key, power, count, node_count):
     from tracer.guiding.photons import trace_photons
     from tracer.guiding.spatial import accumulate
 
-    def sink(node, b, v, x, nrm):
-        accumulate(node.astype(np.int64), b.astype(np.int64), v.astype(np.float64), node_slot, power, count,
-                   node_count)
+    def sink(node, b, v, x, nrm):  # node, b int64 and v float64 already (PhotonBuffers)
+        accumulate(node, b, v, node_slot, power, count, node_count)
 
     trace_photons(ctx, gs, node_slot, n, key, sink, first_hit=False)
 

@@ -24,6 +24,16 @@ import numpy as np
 KINDS = ("room", "corridor", "open")
 
 
+def _box_faces(inward):
+    """Triangles of a box whose 8 corners come in the order (0,0,0), (1,0,0), (1,1,0), (0,1,0), then
+    the same at z = 1; counter-clockwise seen from outside, or with `inward` from inside."""
+    quads = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (3, 7, 6, 2), (0, 4, 7, 3), (1, 2, 6, 5)]
+    f = []
+    for a, b, c, d in quads:
+        f += [(a, c, b), (a, d, c)] if inward else [(a, b, c), (a, c, d)]
+    return f
+
+
 class _Builder:
     def __init__(self, rng):
         self.rng = rng
@@ -54,11 +64,7 @@ class _Builder:
                       [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]])
         cs, sn = math.cos(yaw), math.sin(yaw)
         v = v @ np.array([[cs, 0, -sn], [0, 1, 0], [sn, 0, cs]]) + c
-        quads = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (3, 7, 6, 2), (0, 4, 7, 3), (1, 2, 6, 5)]
-        f = []
-        for a, b, cc, d in quads:
-            f += [(a, b, cc), (a, cc, d)]
-        self.add(mat, v, f)
+        self.add(mat, v, _box_faces(inward=False))
 
     def sphere(self, mat, centre, radius, subdiv=2):
         t = (1.0 + 5 ** 0.5) / 2.0
@@ -239,10 +245,7 @@ def _corridor(b):
     r = b.rng
     size = np.array([r.uniform(1.5, 3.0), r.uniform(2.4, 3.5), r.uniform(8, 16)])
     v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]) * size
-    quads = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (3, 7, 6, 2), (0, 4, 7, 3), (1, 2, 6, 5)]
-    f = []
-    for a, bb, c, d in quads:
-        f += [(a, c, bb), (a, d, c)]  # inward
+    f = _box_faces(inward=True)
     b.add(b.material("Kd {0:.3f} {0:.3f} {0:.3f}".format(r.uniform(0.3, 0.85))), v, f)
     zl = r.uniform(0.7, 0.95) * size[2]
     _ceiling_lamp(b, np.array([0, 0, zl - 0.1 * size[2]]), np.array([size[0], size[1], zl]))

@@ -303,7 +303,7 @@ class HistogramGuide(Guide):
         out = dict(self.info)
         out.update({"name": self.name, "iterations_done": self.iteration, "settings": dict(self.settings),
                     "reconstruct": self.reconstructor.describe(),
-                    "maps_inferred": int(getattr(self.reconstructor, "maps_inferred", 0))})
+                    "maps_inferred": int(self.reconstructor.maps_inferred)})
         if g is not None:
             leaves = g.leaves()
             out.update({"cells": int(g.n_cells), "nodes": int(g.n_nodes), "voxels": int(leaves.size),
@@ -476,8 +476,7 @@ class PhotonGuide(HistogramGuide):
         if maps is None:
             return
         mask = maps > 0.0
-        rc = self.reconstructor if not self.reconstructor.neural else make_reconstructor("gaussian",
-                                                                                          sigma=self.settings["sigma"])
+        rc = self.reconstructor.dense if self.reconstructor.neural else self.reconstructor
         rec = rc.reconstruct(maps, mask.astype(np.float32), mask)  # the network knows radiance maps only
         g.set_maps(slots, build_tables(rec), importance=True)
 

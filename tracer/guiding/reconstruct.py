@@ -63,8 +63,9 @@ def _blur(maps, offs, w, out):
 
 class Reconstructor:
     name = "none"
-    neural = False
+    neural = False  # a network: it has `dense`, the classical filter used for what it was not trained on
     time_inference = 0.0  # seconds spent in network inference (neural reconstructors)
+    maps_inferred = 0  # maps the network reconstructed
 
     def reconstruct(self, maps, counts, masks, prev=None, prev_counts=None):
         return maps
@@ -131,9 +132,10 @@ class PullPush(Reconstructor):
 
 class CNN(Reconstructor):
     """The photon map network: S_d = F(S_t, S_{t-1}, P_t, P_{t-1}, B_t), for maps holding fewer than
-    `max_photons` photons; denser maps take the Gaussian filter of `sigma` bins, within 3.4% of the
-    network's L1 there where the training data reach (docs/photon_cnn.md) and far cheaper. Loads the shipped weights on first use (or `weights`, a folder holding
-    photon_cnn.pt and .json)."""
+    `max_photons` photons; denser maps take the Gaussian filter of `sigma` bins (`dense`), within
+    3.4% of the network's L1 there where the training data reach (docs/photon_cnn.md) and far
+    cheaper. Loads the shipped weights on first use (or `weights`, a folder holding photon_cnn.pt
+    and .json)."""
 
     name = "cnn"
     neural = True
