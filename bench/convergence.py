@@ -115,6 +115,11 @@ def check_method(method):
         make_guide(name, **settings)
 
 
+# guide statistics a record keeps (pss: the chosen model and the share of zero-valued samples)
+GUIDE_STATS = ("m", "layers", "width", "parameters", "val_nll", "epochs", "fallback", "zero_share_uniform",
+               "zero_share_final", "second_moment_ratio", "inference_us_per_sample", "candidates_lit")
+
+
 def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
     r = tracer.render(scene, spp=spp, time=time_budget, seed=seed, **render_args(method))
     s = r.stats
@@ -139,6 +144,7 @@ def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
         "metrics": metrics.all_metrics(r.image, ref),
         "nonfinite_samples": s["nonfinite_samples"],
         "image": image,
+        "guide_stats": {k: v for k, v in s.get("guide_stats", {}).items() if k in GUIDE_STATS},
     }
 
 
@@ -273,7 +279,8 @@ def summary_table(all_records, scenes, methods, times, floors):
                 cells.append(f"{v:.3g} ({ratio:.2f})" if np.isfinite(ratio) else f"{v:.3g}")
             lines.append(f"| {m} | " + " | ".join(cells) + " |")
         lines.append("")
-        guided = [m for m in methods if m != "bsdf"]
+        lines += spp_table([r for r in all_records if r["scene"] == scene and r["budget"] == "spp"], methods)
+        guided = [m for m in methods if m != "bsdf"] if times else []
         corrected = []
         for m in guided:
             cells = []
@@ -309,6 +316,48 @@ def summary_table(all_records, scenes, methods, times, floors):
                                  f"{max(r['guide_memory_bytes'] for r in rr) / 1e6:.0f} |")
             lines.append("")
     return "\n".join(lines)
+
+
+def spp_table(recs, methods):
+    """Lines of the equal-spp table (relMSE, mean over seeds, ratio to bsdf) and, for methods that
+    record them, their guide statistics (medians over seeds); [] without spp records."""
+    spps = sorted({r["spp"] for r in recs})
+    if not spps:
+        return []
+    lines = ["relMSE at equal spp (every sample traced counts, a learning pass's too):", "",
+             "| method | " + " | ".join(f"{n} spp" for n in spps) + " |", "|---|" + "---|" * len(spps)]
+    base = {n: np.mean([r["metrics"]["relMSE"] for r in recs if r["method"] == "bsdf" and r["spp"] == n] or [np.nan])
+            for n in spps}
+    for m in methods:
+        cells = []
+        for n in spps:
+            e = [r["metrics"]["relMSE"] for r in recs if r["method"] == m and r["spp"] == n]
+            cells.append(f"{np.mean(e):.3g} ({np.mean(e) / base[n]:.2f})" if e and np.isfinite(base[n]) else
+                         f"{np.mean(e):.3g}" if e else "-")
+        lines.append(f"| {m} | " + " | ".join(cells) + " |")
+    lines.append("")
+    keyed = [m for m in methods if any(r["method"] == m and r.get("guide_stats", {}).get("zero_share_uniform")
+                                       is not None for r in recs)]
+    if keyed:
+        lines += [f"At {spps[-1]} spp (medians over seeds): the model chosen (m bounces, coupling layers x width), "
+                  "validation NLL, the share of zero-valued samples in the uniform candidate pass and in the warped "
+                  "passes, the per-sample second moment the warp promises against uniform sampling (validation "
+                  "candidates), learning seconds, inference microseconds per sample.", "",
+                  "| method | model | val NLL | zero share uniform | zero share warped | second moment ratio "
+                  "| learning s | inference us/sample |", "|---|---|---|---|---|---|---|---|"]
+        for m in keyed:
+            rr = [r for r in recs if r["method"] == m and r["spp"] == spps[-1]]
+            gs = [r["guide_stats"] for r in rr]
+            models = sorted({f"m{g['m']} {g['layers']}x{g['width']}" if g.get("m") else "uniform" for g in gs})
+
+            def med(key):
+                v = [g[key] for g in gs if g.get(key) is not None]
+                return float(np.median(v)) if v else np.nan
+            lines.append(f"| {m} | {', '.join(models)} | {med('val_nll'):.2f} | {med('zero_share_uniform'):.3f} | "
+                         f"{med('zero_share_final'):.3f} | {med('second_moment_ratio'):.2f} | "
+                         f"{np.median([r['time_learning'] for r in rr]):.1f} | {med('inference_us_per_sample'):.2f} |")
+        lines.append("")
+    return lines
 
 
 def write_outputs(out, all_records, scenes, methods, times, floors):
@@ -352,7 +401,8 @@ def main(argv=None):
     p.add_argument("--scenes", help="comma-separated scene names or paths")
     p.add_argument("--methods", default="bsdf", help="comma-separated registered guide names, each with "
                    "optional settings: name:key=value,... (separate methods with ';' when settings are given)")
-    p.add_argument("--time", default="10,20,40,80", help="comma-separated wall-time budgets in seconds")
+    p.add_argument("--time", default="10,20,40,80", help="comma-separated wall-time budgets in seconds "
+                   "(none: spp budgets only, given by --spp)")
     p.add_argument("--spp", default=None, help="comma-separated spp budgets (default: what bsdf reached; none: time budgets only)")
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--scene-dir", default=None, help="folder of external scenes (<dir>/<name>/scene.obj)")
@@ -370,7 +420,9 @@ def main(argv=None):
         check_method(m)
     if "bsdf" not in methods:
         methods.insert(0, "bsdf")  # every ratio is against bsdf
-    times = [float(t) for t in a.time.split(",")]
+    times = [] if a.time == "none" else [float(t) for t in a.time.split(",")]
+    if not times and (a.spp is None or a.spp == "none"):
+        p.error("--time none needs --spp budgets")
     os.makedirs(a.out, exist_ok=True)
     all_records = []
     floors = {}

@@ -201,6 +201,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     splits = g is not None and g.splits
     if g is not None:
         warm_up_guides(ctx)
+        g.warm_up(ctx)
     if splits:
         warm_up_splitting(ctx)
     if integrator == "gpt":

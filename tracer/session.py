@@ -119,10 +119,11 @@ class Session:
         if self.bar is not None:
             self.bar.update(n / self.ctx.n_pixels)
 
-    def final_passes(self, split=None):
+    def final_passes(self, split=None, source=None):
         """Fill the rest of the budget with final passes into self.final: each twice the last pass's
         spp (the first as many as the last pass, or 1), up to `spp` in all, or, with a time budget,
-        while the next one fits in the time left at the final passes' speed so far."""
+        while the next one fits in the time left at the final passes' speed so far. source: where
+        the paths start (default: the camera; e.g. a guiding.pss.WarpSource)."""
         if not any(f is self.final for f, _ in self.films):
             self.films.append((self.final, "final"))
         self.phase("final")
@@ -142,5 +143,5 @@ class Session:
                     pass_spp = min(pass_spp, int((self.time - elapsed) / per_spp))
                     if pass_spp < 1:
                         break
-            self.run_pass(self.final, pass_spp, "final", split=split)
+            self.run_pass(self.final, pass_spp, "final", source=source, split=split)
             pass_spp *= 2

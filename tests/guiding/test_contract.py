@@ -16,7 +16,7 @@ from tracer.guiding import REGISTRY, make_guide
 from tracer.guiding.directional import bin_of_batch
 from tracer.guiding.spatial import guide_pdf_batch, guide_sample_batch
 
-GUIDES = [name for name, (factory, _) in REGISTRY.items() if factory is not None]
+GUIDES = [name for name, (factory, _) in REGISTRY.items() if hasattr(factory, "fixed_state")]  # directional guides
 H, W = 8, 16
 
 

@@ -14,14 +14,14 @@ import tracer
 from tests import scenes
 from tests.stats import assert_clean, assert_z, image_mean
 from tracer.errors import SettingsError
-from tracer.guiding import FrozenGuide, guide_names, make_guide
+from tracer.guiding import REGISTRY, FrozenGuide, guide_names, make_guide
 from tracer.integrator import trace_wave
 from tracer.sources import CameraSource
 from tracer.splitting import WeightWindow, throughput_plan
 from tracer.wave import Stats, WaveBuffers
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-GUIDES = [g for g in guide_names() if g != "bsdf"]
+GUIDES = [g for g in guide_names() if hasattr(REGISTRY[g][0], "fixed_state")]  # the directional guides
 # every guide at its defaults (mixing weights of least second moment), and the paper's eq. 14
 # weights (which change how often each strategy is drawn, so they must leave the mean alone too)
 # and paths split where they become overweight (split 1.5: often, so that the test sees it), and a

@@ -13,12 +13,14 @@ import copy
 from ..errors import SettingsError, unknown_name
 from .base import Guide
 from .histogram import GridGuide, PhotonGuide
+from .pss import PSSGuide
 
 # name -> (factory or None for plain BSDF sampling, {setting: default})
 REGISTRY = {
     "bsdf": (None, {}),
     "grid": (GridGuide, GridGuide.DEFAULTS),
     "photon": (PhotonGuide, PhotonGuide.DEFAULTS),
+    "pss": (PSSGuide, PSSGuide.DEFAULTS),
 }
 
 

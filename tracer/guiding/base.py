@@ -4,6 +4,7 @@ A guide is a Python object that render() drives, and a GuideState its Numba kern
 render() and the integrator ask of it:
 
     prepare(scene, ctx)    start of a render (ctx: tracer.context.RenderContext)
+    warm_up(ctx)           before the clock starts: compile what its passes need
     state()                the GuideState the kernels sample from (tracer.guiding.spatial): they
                            locate a vertex's map (`spatial.locate(state, x, n, pixel, depth)`, a
                            voxel's map, or a per-pixel map at the first bounce), then draw from it
@@ -44,6 +45,10 @@ class Guide:
 
     def prepare(self, scene, ctx):
         pass
+
+    def warm_up(self, ctx):
+        """Before the clock starts: compile (or load from the cache) what this guide's passes run
+        beyond the guides' common kernels (render() calls it after guiding.warm_up_guides)."""
 
     def state(self):
         return empty_state()
