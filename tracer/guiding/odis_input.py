@@ -1,0 +1,110 @@
+"""The ODIS network's input: initial samples gathered around a pixel and binned into its map
+(Bako et al. 2019, sections 3.3 and 4.1).
+
+An initial sample is one first-bounce direction of a camera path with what came back along it and
+the two hits' features. For a map centred at film pixel c, every sample of the k x k pixels around
+c (clipped to the film) goes to the bin of its world-space direction on the full sphere
+(tracer.guiding.directional: n_theta rows uniform in z, n_phi columns uniform in phi, so every bin
+covers the same solid angle), without warping for the change of position. Each bin holds the mean
+of its samples' 9 channels:
+
+    0        incident radiance (the mean of R, G, B)
+    1        depth of the first hit (camera to hit)
+    2, 3, 4  shading normal at the first hit
+    5        depth of the second hit (first hit to second; 0 where the direction escaped)
+    6, 7, 8  shading normal at the second hit (0 where it escaped)
+
+and two masks: `sampled` (the bin received a sample) and `valid` (some corner or the centre of
+the bin lies above the surface whose normal is the mean of c's own first-hit normals; all 0 when c
+has no sample, so that pixel takes BSDF sampling alone).
+"""
+import numpy as np
+from numba import prange
+
+from .._jit import kernel
+from .directional import bin_direction, direction_bin
+
+N_CHANNELS = 9
+
+
+def pixel_order(pix, n_pixels):
+    """(order, start): samples sorted by pixel (stable), and start (n_pixels + 1,) with the samples
+    of pixel p at order[start[p]:start[p + 1]]."""
+    pix = np.asarray(pix, dtype=np.int64)
+    order = np.argsort(pix, kind="stable")
+    start = np.zeros(n_pixels + 1, np.int64)
+    np.cumsum(np.bincount(pix, minlength=n_pixels), out=start[1:])
+    return order, start
+
+
+@kernel
+def _gather(order, start, dirs, chans, width, height, centres, k, n_theta, n_phi, feats, sampled, valid):
+    n_bins = n_theta * n_phi
+    r = k // 2
+    for m in prange(centres.shape[0]):
+        c = centres[m]
+        cx = c % width
+        cy = c // width
+        sums = np.zeros((N_CHANNELS, n_bins))
+        count = np.zeros(n_bins)
+        for y in range(max(cy - r, 0), min(cy + r + 1, height)):
+            for x in range(max(cx - r, 0), min(cx + r + 1, width)):
+                p = y * width + x
+                for j in range(start[p], start[p + 1]):
+                    s = order[j]
+                    b = direction_bin((dirs[s, 0], dirs[s, 1], dirs[s, 2]), n_theta, n_phi)
+                    count[b] += 1.0
+                    for ch in range(N_CHANNELS):
+                        sums[ch, b] += chans[s, ch]
+        for b in range(n_bins):
+            if count[b] > 0.0:
+                sampled[m, b] = 1
+                for ch in range(N_CHANNELS):
+                    feats[m, ch, b] = sums[ch, b] / count[b]
+        nx = 0.0
+        ny = 0.0
+        nz = 0.0
+        for j in range(start[c], start[c + 1]):
+            s = order[j]
+            nx += chans[s, 2]
+            ny += chans[s, 3]
+            nz += chans[s, 4]
+        if start[c + 1] > start[c] and nx * nx + ny * ny + nz * nz > 0.0:
+            for b in range(n_bins):
+                above = False
+                for st in ((0.0, 0.0), (0.0, 1.0), (1.0, 0.0), (1.0, 1.0), (0.5, 0.5)):
+                    d = bin_direction(b, n_theta, n_phi, st[0], st[1])
+                    if d[0] * nx + d[1] * ny + d[2] * nz > 0.0:
+                        above = True
+                valid[m, b] = 1 if above else 0
+
+
+def gather(pix, dirs, radiance, depth1, normal1, depth2, normal2, width, height, centres, k=11, n_theta=32,
+           n_phi=32):
+    """Bin the initial samples around each centre pixel (see the module docstring).
+
+    pix (n,) film pixel of each sample; dirs (n, 3) unit world direction of the first bounce;
+    radiance (n, 3) or (n,); depth1, depth2 (n,); normal1, normal2 (n, 3); centres (m,) film
+    pixels; k odd window size. Returns (features (m, 9, n_theta, n_phi) float32, sampled and valid
+    (m, n_theta, n_phi) uint8)."""
+    if k < 1 or k % 2 == 0:
+        raise ValueError(f"k must be odd and >= 1, got {k}")
+    n = np.asarray(pix).shape[0]
+    rad = np.asarray(radiance, dtype=np.float64)
+    rad = rad.mean(axis=1) if rad.ndim == 2 else rad
+    chans = np.empty((n, N_CHANNELS))
+    chans[:, 0] = rad
+    chans[:, 1] = depth1
+    chans[:, 2:5] = normal1
+    chans[:, 5] = depth2
+    chans[:, 6:9] = normal2
+    order, start = pixel_order(pix, width * height)
+    centres = np.asarray(centres, dtype=np.int64)
+    m = centres.shape[0]
+    feats = np.zeros((m, N_CHANNELS, n_theta * n_phi), np.float32)
+    sampled = np.zeros((m, n_theta * n_phi), np.uint8)
+    valid = np.zeros((m, n_theta * n_phi), np.uint8)
+    _gather(order, start, np.ascontiguousarray(dirs, dtype=np.float64), chans, int(width), int(height), centres,
+            int(k), int(n_theta), int(n_phi), feats, sampled, valid)
+    shape = (m, n_theta, n_phi)
+    return feats.reshape(m, N_CHANNELS, n_theta, n_phi), sampled.reshape(shape), valid.reshape(shape)
