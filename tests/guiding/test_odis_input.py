@@ -78,3 +78,48 @@ def test_window_is_clipped_at_the_film_border_and_k_must_be_odd():
          for d in s["dirs"]]).size  # every sample of the 3 x 3 film, nothing outside
     with pytest.raises(ValueError):
         gather(*args, np.array([4]), k=4)
+
+
+def test_initial_samples_in_a_closed_box_match_the_geometry(tmp_path):
+    # Inside the cube [-1, 1]^3 every first-bounce direction meets another wall: depth2 is the
+    # exit distance along the direction and normal2 that wall's inward normal (the slab formula,
+    # written here), depth1 the distance from the camera to the first hit.
+    import tracer
+    from tests import scenes
+    from tracer.film import Film
+    from tracer.guiding.odis_input import initial_samples
+    from tracer.render import make_context
+    from tracer.session import trace_source
+    from tracer.sources import CameraSource
+    from tracer.wave import WaveBuffers
+
+    scene = tracer.load_scene(scenes.closed_box(tmp_path, 0.5, 1.0, width=10, height=8))
+    ctx = make_context(scene, seed=3, max_depth=3)
+    origin = np.array([0.0, 0.0, 0.5])
+    sizes, counts = [], []
+
+    def check(rec):  # the records are the wave buffer's: check them before the next wave
+        n = sizes[-1]
+        s = initial_samples(rec, n, origin)
+        first = np.nonzero(rec.strategy[:n] >= 0)[0]
+        assert s["pix"].shape[0] == first.shape[0] > 0
+        x0 = rec.x[first].astype(np.float64)
+        np.testing.assert_allclose(s["depth1"], np.linalg.norm(x0 - origin, axis=1), rtol=1e-6)
+        d = s["dirs"]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_axes = (np.sign(d) - x0) / d
+        t_axes[~np.isfinite(t_axes) | (t_axes <= 0)] = np.inf
+        axis = np.argmin(t_axes, axis=1)
+        rows = np.arange(d.shape[0])
+        np.testing.assert_allclose(s["depth2"], t_axes[rows, axis], rtol=1e-4, atol=1e-4)
+        want_n = np.zeros_like(d)
+        want_n[rows, axis] = -np.sign(d[rows, axis])
+        np.testing.assert_allclose(s["normal2"], want_n, atol=1e-5)
+        assert np.abs(s["normal1"]).max(axis=1).min() > 0.99999  # axis-aligned walls
+        assert np.isfinite(s["radiance"]).all() and (s["radiance"] >= 0).all()
+        counts.append(first.shape[0])
+
+    trace_source(ctx, CameraSource(), Film(10, 8), spp=3, buf=WaveBuffers(100), observe=check,
+                 before_wave=sizes.append)
+    assert sizes == [100, 100, 40]
+    assert sum(counts) == 240  # every camera ray hits a diffuse wall and samples a direction

@@ -2,7 +2,7 @@
 (Bako et al. 2019, sections 3.3 and 4.1).
 
 An initial sample is one first-bounce direction of a camera path with what came back along it and
-the two hits' features. For a map centred at film pixel c, every sample of the k x k pixels around
+the two hits' features (`initial_samples` takes them from a wave's records). For a map centred at film pixel c, every sample of the k x k pixels around
 c (clipped to the film) goes to the bin of its world-space direction on the full sphere
 (tracer.guiding.directional: n_theta rows uniform in z, n_phi columns uniform in phi, so every bin
 covers the same solid angle), without warping for the change of position. Each bin holds the mean
@@ -108,3 +108,33 @@ def gather(pix, dirs, radiance, depth1, normal1, depth2, normal2, width, height,
             int(k), int(n_theta), int(n_phi), feats, sampled, valid)
     shape = (m, n_theta, n_phi)
     return feats.reshape(m, N_CHANNELS, n_theta, n_phi), sampled.reshape(shape), valid.reshape(shape)
+
+
+def initial_samples(records, n, origin):
+    """The initial samples of one wave of n camera paths, from its records (traced with observe, no
+    splitting): {pix, dirs, radiance, depth1, normal1, depth2, normal2} for the paths whose first hit
+    sampled a direction (not a delta BSDF, not an emitter that ended the path).
+
+    Records [0, n) are the wave's first hits (integrator.trace_wave: bounce 0 reserves one entry per
+    path); a first hit's second vertex is the record whose `prev` is it. depth1 is the distance from
+    `origin` (the camera's position), depth2 the distance between the two hits (0 with normal2 0
+    where the direction escaped or ended on a delta BSDF). radiance is the luminance that came back
+    along the direction (with the render's max_depth 3: the second hit's emission and its direct
+    light, i.e. direct plus one-bounce indirect seen from the first hit). The arrays are copies: the
+    records are the wave buffer's and the next wave overwrites them."""
+    first = records.strategy[:n] >= 0
+    nxt = np.full(n, -1, np.int64)
+    later = np.arange(n, records.strategy.shape[0])
+    pv = records.prev[n:]
+    link = (pv >= 0) & (pv < n) & (records.strategy[n:] >= 0)
+    nxt[pv[link]] = later[link]
+    idx = np.nonzero(first)[0]
+    x0 = records.x[idx].astype(np.float64)
+    j = nxt[idx]
+    has2 = j >= 0
+    x1 = np.where(has2[:, None], records.x[np.maximum(j, 0)].astype(np.float64), x0)
+    n1 = np.where(has2[:, None], records.n[np.maximum(j, 0)].astype(np.float64), 0.0)
+    return {"pix": records.pixel[idx].copy(), "dirs": records.wi[idx].astype(np.float64),
+            "radiance": records.radiance[idx].astype(np.float64),
+            "depth1": np.linalg.norm(x0 - np.asarray(origin, dtype=np.float64), axis=1),
+            "normal1": records.n[idx].astype(np.float64), "depth2": np.linalg.norm(x1 - x0, axis=1), "normal2": n1}
