@@ -264,3 +264,12 @@ def test_auto_keeps_the_model_of_least_validation_nll():
     assert (st["m"], st["layers"], st["width"]) == (best["m"], best["layers"], best["width"])
     assert best["epochs"] == 2 and all(t["epochs"] == 1 for t in tried if t is not best)
     assert st["val_nll"] == best["val_nll"] and g.flow.dims == 2 + 2 * st["m"] - 2  # pixel: directions only
+
+
+def test_a_short_time_budget_falls_back_to_uniform():
+    # share x time = 0.06 s, below the 1 s the learning needs whatever the machine's speed
+    g = make_guide("pss")
+    r = tracer.render(_scene("cornell", 16, 16), time=0.2, guide=g, seed=3)
+    assert_clean(r)
+    assert g.flow is None and g.stats()["fallback"].startswith("too little time left to learn")
+    assert 1 <= sum(p["spp"] for p in r.stats["passes"] if p["kind"] == "train") <= g.candidates

@@ -42,6 +42,7 @@ TARGETS = ("relative", "luminance")
 M_CHOICES = (1, 2)
 SIZES = ((4, 16), (4, 32), (8, 32))  # (coupling layers, width) tried by "auto"
 MIN_LIT = 64  # fewer lit candidate samples than this: no warp
+MIN_LEARN_S = 1.0  # with a time budget, less learning time than this: no warp
 _LATENT_SALT = 0x707373  # "pss": the latent z and the mixture choice come from keys of their own
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 
@@ -238,7 +239,13 @@ class PSSGuide(Guide):
         session.films.append((film, "train"))
         session.phase("candidates")
         sample0 = session.sample0
-        session.run_pass(film, n_c, "train")
+        if session.time is None:
+            session.run_pass(film, n_c, "train")
+        else:  # 1 spp at a time, while within half the learning share of the budget
+            for _ in range(n_c):
+                session.run_pass(film, 1, "train")
+                if session.elapsed() > 0.5 * self.share * session.time:
+                    break
         t0 = _time.perf_counter()
         if session.time is not None:
             seconds = self.share * session.time - session.elapsed()
@@ -247,6 +254,8 @@ class PSSGuide(Guide):
         session.phase("learn")
         if session.time is None and session.sample0 >= session.spp:
             reason = "no samples left after the candidate pass"
+        elif session.time is not None and seconds < MIN_LEARN_S:
+            reason = f"too little time left to learn ({max(seconds, 0.0):.2f} s)"
         else:
             reason = self.learn(ctx, film, sample0, seconds)
         self.peak_memory = self.memory_bytes()
