@@ -23,6 +23,7 @@ import torch.nn.functional as F
 from tracer.guiding import photon_cnn
 from tracer.guiding.photon_cnn import PhotonUNet, features
 from tracer.guiding.reconstruct import make_reconstructor
+from tracer.imageio import replace_atomically
 
 from .photon_data import DEFAULTS as DATA_DEFAULTS
 from .photon_data import load_shards, shard_config
@@ -69,16 +70,18 @@ def validate(model, data, device, batch=256):
 
 
 def _save(obj, path):
-    tmp = path + ".tmp"
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
+    replace_atomically(path, lambda tmp: torch.save(obj, tmp))
+
+
+def _write_text(text, path):
+    def write(tmp):
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(text)
+    replace_atomically(path, write)
 
 
 def _write_json(obj, path):
-    tmp = path + ".tmp"
-    with open(tmp, "w") as f:
-        json.dump(obj, f, indent=1)
-    os.replace(tmp, path)
+    _write_text(json.dumps(obj, indent=1), path)
 
 
 def train(a):
@@ -284,7 +287,5 @@ def evaluate(a):
         os.makedirs(a.out, exist_ok=True)
         _write_json({"validation_scenes": [os.path.basename(p) for p in va_paths], "rows": rows},
                     os.path.join(a.out, "map_quality.json"))
-        with open(os.path.join(a.out, "map_quality.md.tmp"), "w") as f:
-            f.write(table + "\n")
-        os.replace(os.path.join(a.out, "map_quality.md.tmp"), os.path.join(a.out, "map_quality.md"))
+        _write_text(table + "\n", os.path.join(a.out, "map_quality.md"))
     return rows

@@ -15,6 +15,8 @@ import time
 
 import numpy as np
 
+from tracer.imageio import replace_atomically
+
 
 def shard_path(out_dir, seed):
     return os.path.join(out_dir, f"shard_{int(seed):05d}.npz")
@@ -22,13 +24,7 @@ def shard_path(out_dir, seed):
 
 def save_npz(path, **arrays):
     """np.savez_compressed into `path` through a temporary file renamed into place."""
-    tmp = f"{path}.tmp{os.getpid()}.npz"
-    try:
-        np.savez_compressed(tmp, **arrays)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    replace_atomically(path, lambda tmp: np.savez_compressed(tmp, **arrays))
 
 
 def list_shards(out_dir):

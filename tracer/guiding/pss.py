@@ -30,8 +30,9 @@ import time as _time
 import numba
 import numpy as np
 
-from ..errors import SettingsError
+from ..errors import SettingsError, unknown_name
 from ..film import Film
+from ..lights import luminance
 from ..rng import pss_dims, uniform_batch, primary_samples
 from ..sources import CameraSource
 from .base import Guide
@@ -44,7 +45,6 @@ SIZES = ((4, 16), (4, 32), (8, 32))  # (coupling layers, width) tried by "auto"
 MIN_LIT = 64  # fewer lit candidate samples than this: no warp
 MIN_LEARN_S = 1.0  # with a time budget, less learning time than this: no warp
 _LATENT_SALT = 0x707373  # "pss": the latent z and the mixture choice come from keys of their own
-_LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
 class _CountingFilm(Film):
@@ -59,7 +59,7 @@ class _CountingFilm(Film):
 
     def add(self, pixel, radiance, aov, weight=None, spread=False):
         super().add(pixel, radiance, aov, weight, spread)
-        lum = radiance @ _LUMA
+        lum = luminance(radiance)
         if weight is not None:
             lum = lum * weight
         self.zeros += int(np.count_nonzero(lum == 0.0))
@@ -179,10 +179,10 @@ class PSSGuide(Guide):
     def __init__(self, **settings):
         s = dict(self.DEFAULTS, **settings)
         if s["condition"] not in CONDITIONS:
-            raise SettingsError(f"guide setting condition: unknown {s['condition']!r}; valid: " + ", ".join(CONDITIONS))
+            raise unknown_name("guide setting condition", s["condition"], CONDITIONS)
         self.condition = s["condition"]
         if s["target"] not in TARGETS:
-            raise SettingsError(f"guide setting target: unknown {s['target']!r}; valid: " + ", ".join(TARGETS))
+            raise unknown_name("guide setting target", s["target"], TARGETS)
         self.target = s["target"]
         self.m = self._auto("m", s["m"], M_CHOICES)
         self.layers = self._auto("layers", s["layers"], None)
@@ -297,7 +297,7 @@ class PSSGuide(Guide):
         u[:, 1] = (p // cw + u[:, 1]) / ch
         f = lum[g]
         if self.target == "relative":  # f / the pixel's candidate mean: every lit pixel gets equal mass
-            mean = (film.sum @ _LUMA / np.maximum(film.count, 1.0))[p]
+            mean = (luminance(film.sum) / np.maximum(film.count, 1.0))[p]
             f = np.where(f > 0, f / np.where(mean > 0, mean, 1.0), 0.0)
         return u, _pixel_xy(ctx, p), f
 
@@ -331,7 +331,13 @@ class PSSGuide(Guide):
         cands = [(m, L, W) for m in ([self.m] if self.m else M_CHOICES)
                  for L, W in [(self.layers or l, self.width or w) for l, w in SIZES]]
         cands = list(dict.fromkeys(cands))
-        runs = [_Fit(self, m, L, W, parts) for m, L, W in cands]
+        data = {}  # per warped-column slice and part: (logit targets, context, mean NLL constant), made once
+        for m in dict.fromkeys(m for m, _, _ in cands):
+            data[m] = {}
+            for part, (yp, cp) in parts.items():
+                b, const = pss_flow.prepare_targets(yp[:, warped_columns(self.condition, m)])
+                data[m][part] = (b, None if cp is None else torch.from_numpy(cp), float(const[:65536].mean()))
+        runs = [_Fit(self, m, L, W, data[m]) for m, L, W in cands]
         share = 0.5 if len(runs) > 1 else 1.0
         for r in runs:
             r.train(seconds * share / len(runs), self.epochs)
@@ -382,7 +388,7 @@ class _Fit:
     """One candidate flow trained by maximum likelihood on the resampled examples, with its best
     state by validation NLL."""
 
-    def __init__(self, guide, m, layers, width, parts):
+    def __init__(self, guide, m, layers, width, data):
         import torch
 
         from . import pss_flow
@@ -394,10 +400,7 @@ class _Fit:
         self.flow = pss_flow.PSSFlow(sl.stop - sl.start, layers, width, guide.blocks, context=ctx)
         self.opt = torch.optim.Adam(self.flow.parameters(), lr=guide.lr)
         self.batch = guide.batch
-        self.data = {}
-        for part, (y, c) in parts.items():
-            b, const = pss_flow.prepare_targets(y[:, sl])
-            self.data[part] = (b, None if c is None else torch.from_numpy(c), float(const[:65536].mean()))
+        self.data = data  # {"train" | "val": (logit targets, context or None, mean NLL constant)}
         self.best_nll = math.inf
         self.best_state = copy.deepcopy(self.flow.state_dict())  # the identity, until an epoch beats it
         self.epochs_done = 0
