@@ -115,9 +115,11 @@ def check_method(method):
         make_guide(name, **settings)
 
 
-# guide statistics a record keeps (pss: the chosen model and the share of zero-valued samples)
+# guide statistics a record keeps (pss: the chosen model and the share of zero-valued samples;
+# odis: the pixels with a map, the gather window and how full it was)
 GUIDE_STATS = ("m", "layers", "width", "parameters", "val_nll", "epochs", "fallback", "zero_share_uniform",
-               "zero_share_final", "second_moment_ratio", "inference_us_per_sample", "candidates_lit")
+               "zero_share_final", "second_moment_ratio", "inference_us_per_sample", "candidates_lit",
+               "pixels_guided", "pixels", "window", "centre_sparsity", "initial_lit")
 
 
 def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
@@ -262,12 +264,12 @@ def summary_table(all_records, scenes, methods, times, floors):
         recs = [r for r in all_records if r["scene"] == scene and r["budget"] == "time"]
         lines += [f"## {scene}", "",
                   f"Reference: noise floor {floors[scene]:.3g}, smallest error judged {smallest:.3g}: "
-                  + ("good enough." if ok else "**too noisy: extend it with `bench.reference --append`**."), "",
-                  "| method | " + " | ".join(f"{t:g} s" for t in times) + " |",
-                  "|---|" + "---|" * len(times)]
+                  + ("good enough." if ok else "**too noisy: extend it with `bench.reference --append`**."), ""]
+        if times:
+            lines += ["| method | " + " | ".join(f"{t:g} s" for t in times) + " |", "|---|" + "---|" * len(times)]
         base = {t: np.mean([r["metrics"]["relMSE"] for r in recs if r["method"] == "bsdf" and r["time_budget"] == t]
                            or [np.nan]) for t in times}
-        for m in methods:
+        for m in (methods if times else []):
             cells = []
             for t in times:
                 e = [r["metrics"]["relMSE"] for r in recs if r["method"] == m and r["time_budget"] == t]
@@ -278,7 +280,8 @@ def summary_table(all_records, scenes, methods, times, floors):
                 ratio = v / base[t] if base[t] and np.isfinite(base[t]) else np.nan
                 cells.append(f"{v:.3g} ({ratio:.2f})" if np.isfinite(ratio) else f"{v:.3g}")
             lines.append(f"| {m} | " + " | ".join(cells) + " |")
-        lines.append("")
+        if times:
+            lines.append("")
         lines += spp_table([r for r in all_records if r["scene"] == scene and r["budget"] == "spp"], methods)
         guided = [m for m in methods if m != "bsdf"] if times else []
         corrected = []
@@ -318,24 +321,55 @@ def summary_table(all_records, scenes, methods, times, floors):
     return "\n".join(lines)
 
 
-def spp_table(recs, methods):
-    """Lines of the equal-spp table (relMSE, mean over seeds, ratio to bsdf) and, for methods that
-    record them, their guide statistics (medians over seeds); [] without spp records."""
-    spps = sorted({r["spp"] for r in recs})
-    if not spps:
-        return []
-    lines = ["relMSE at equal spp (every sample traced counts, a learning pass's too):", "",
-             "| method | " + " | ".join(f"{n} spp" for n in spps) + " |", "|---|" + "---|" * len(spps)]
-    base = {n: np.mean([r["metrics"]["relMSE"] for r in recs if r["method"] == "bsdf" and r["spp"] == n] or [np.nan])
+def _spp_rows(recs, methods, spps, metric):
+    """Table rows of `metric` at each spp: mean over seeds, ratio to bsdf in brackets."""
+    base = {n: np.mean([r["metrics"][metric] for r in recs if r["method"] == "bsdf" and r["spp"] == n] or [np.nan])
             for n in spps}
+    rows = []
     for m in methods:
         cells = []
         for n in spps:
-            e = [r["metrics"]["relMSE"] for r in recs if r["method"] == m and r["spp"] == n]
-            cells.append(f"{np.mean(e):.3g} ({np.mean(e) / base[n]:.2f})" if e and np.isfinite(base[n]) else
-                         f"{np.mean(e):.3g}" if e else "-")
-        lines.append(f"| {m} | " + " | ".join(cells) + " |")
-    lines.append("")
+            e = [r["metrics"][metric] for r in recs if r["method"] == m and r["spp"] == n]
+            cells.append(f"{np.mean(e):.3g} ({np.mean(e) / base[n]:.2f})" if e and np.isfinite(base[n]) and base[n] > 0
+                         else f"{np.mean(e):.3g}" if e else "-")
+        rows.append(f"| {m} | " + " | ".join(cells) + " |")
+    return rows
+
+
+SPP_METRICS = ("relMSE", "MrSE", "1-SSIM")  # MrSE: trimmed (the top 0.01% of pixel errors dropped)
+
+
+def spp_table(recs, methods):
+    """Lines of the equal-spp tables (relMSE, trimmed MrSE and 1-SSIM, mean over seeds, ratio to
+    bsdf) and, for methods that record them, their guide statistics (medians over seeds); [] without
+    spp records."""
+    spps = sorted({r["spp"] for r in recs})
+    if not spps:
+        return []
+    lines = []
+    for metric in SPP_METRICS:
+        lines += [f"{metric} at equal spp (every sample traced counts, a learning or initial pass's too):", "",
+                  "| method | " + " | ".join(f"{n} spp" for n in spps) + " |", "|---|" + "---|" * len(spps)]
+        lines += _spp_rows(recs, methods, spps, metric) + [""]
+    odis = [m for m in methods if any(r["method"] == m and r.get("guide_stats", {}).get("pixels_guided") is not None
+                                      for r in recs)]
+    if odis:
+        lines += ["Initial-pass guides (medians over seeds): the share of pixels with a map, the gather window, the "
+                  "share of valid bins the window filled, network inference seconds and their share of the render.",
+                  "", "| method | spp | pixels with a map | window | bins filled | inference s | share of render |",
+                  "|---|---|---|---|---|---|---|"]
+        for m in odis:
+            for n in spps:
+                rr = [r for r in recs if r["method"] == m and r["spp"] == n]
+                gs = [r["guide_stats"] for r in rr if r.get("guide_stats", {}).get("pixels_guided") is not None]
+                if not gs:
+                    continue
+                share = np.median([g["pixels_guided"] / max(g["pixels"], 1) for g in gs])
+                inf = np.median([r["inference_s"] for r in rr])
+                frac = np.median([r["inference_s"] / r["time_total"] for r in rr])
+                lines.append(f"| {m} | {n} | {share:.2f} | {gs[0]['window']} | "
+                             f"{np.median([g['centre_sparsity'] for g in gs]):.2f} | {inf:.3f} | {frac:.1%} |")
+        lines.append("")
     keyed = [m for m in methods if any(r["method"] == m and r.get("guide_stats", {}).get("zero_share_uniform")
                                        is not None for r in recs)]
     if keyed:

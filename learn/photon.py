@@ -12,39 +12,24 @@ import argparse
 import os
 import sys
 
+from .shards import add_data_args, add_train_args
+
 DATA = os.path.join("learn", "data", "photon")
 RUNS = os.path.join("learn", "runs", "photon")
-
-
-def seed_range(text):
-    a, _, b = text.partition(":")
-    return list(range(int(a), int(b))) if b else [int(a)]
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m learn.photon", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="cmd", required=True)
     d = sub.add_parser("data", help="generate shards")
-    d.add_argument("--seeds", type=seed_range, default=seed_range("0:40"), help="scene seeds a:b (default 0:40)")
-    d.add_argument("--out", default=DATA)
-    d.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: one per core)")
-    d.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
+    add_data_args(d, "0:40", DATA)
     d.add_argument("--n-gt", type=int, default=None, help="ground-truth photons per scene")
     d.add_argument("--n0", type=int, default=None, help="input photons of iteration 0")
     d.add_argument("--size", type=int, default=None, help="image size of the guide's pilot")
     t = sub.add_parser("train", help="train (resumes from the run's checkpoint)")
-    t.add_argument("--data", default=DATA)
-    t.add_argument("--run", default=os.path.join(RUNS, "w4"))
-    t.add_argument("--width", type=int, default=4)
-    t.add_argument("--epochs", type=int, default=30)
-    t.add_argument("--patience", type=int, default=4)
-    t.add_argument("--batch", type=int, default=64)
-    t.add_argument("--lr", type=float, default=1e-3)
+    add_train_args(t, DATA, os.path.join(RUNS, "w4"), width=4, epochs=30, patience=4, batch=64, lr=1e-3,
+                   val_scenes=0.15)
     t.add_argument("--lam", type=float, default=2.0, help="asymmetric loss weight lambda (eq. 13)")
-    t.add_argument("--val-scenes", type=float, default=0.15, help="share of scenes held out for validation")
-    t.add_argument("--max-steps", type=int, default=None, help="steps per epoch at most (tests)")
-    t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--device", default=None, help="torch device (default: cuda when available, else cpu)")
     e = sub.add_parser("export", help="export a run's best weights into tracer/weights")
     e.add_argument("--run", default=os.path.join(RUNS, "w4"))
     e.add_argument("--out", default=None, help="weights folder (default: tracer/weights)")

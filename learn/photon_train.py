@@ -69,6 +69,38 @@ def validate(model, data, device, batch=256):
     return np.concatenate(out) if out else np.zeros(0)
 
 
+def open_run(a, fixed, data_command, defaults=None):
+    """Start or resume the run in a.run: (device, checkpoint or None, its path, config, training
+    shard paths, validation shard paths). A resumed run keeps its scene split; a setting in
+    `fixed` that differs from the checkpoint's is an error (a key it lacks reads as defaults[key])."""
+    device = a.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    os.makedirs(a.run, exist_ok=True)
+    ck_path = os.path.join(a.run, "checkpoint.pt")
+    ck = torch.load(ck_path, map_location=device, weights_only=False) if os.path.exists(ck_path) else None
+    defaults = defaults or {}
+    if ck is not None:
+        cfg = ck["config"]
+        changed = [k for k in fixed if cfg.get(k, defaults.get(k)) != getattr(a, k)]
+        if changed:
+            raise SystemExit(f"{ck_path}: trained with " + ", ".join(f"{k}={cfg.get(k, defaults.get(k))}" for k in changed)
+                             + "; resume with the same settings or use another --run")
+        tr_paths = [os.path.join(a.data, f) for f in cfg["train_scenes"]]
+        va_paths = [os.path.join(a.data, f) for f in cfg["val_scenes_files"]]
+        missing = [p for p in tr_paths + va_paths if not os.path.exists(p)]
+        if missing:
+            raise SystemExit(f"{ck_path}: its shards are gone from {a.data} ({os.path.basename(missing[0])}, ...)")
+    else:
+        paths = list_shards(a.data)
+        if not paths:
+            raise SystemExit(f"{a.data}: no shards ({data_command} --out {a.data})")
+        tr_paths, va_paths = split_scenes(paths, a.val_scenes)
+        cfg = {k: getattr(a, k) for k in fixed + ("val_scenes", "data")}
+        cfg["command"] = getattr(a, "command", None)
+        cfg["train_scenes"] = [os.path.basename(p) for p in tr_paths]
+        cfg["val_scenes_files"] = [os.path.basename(p) for p in va_paths]
+    return device, ck, ck_path, cfg, tr_paths, va_paths
+
+
 def _save(obj, path):
     replace_atomically(path, lambda tmp: torch.save(obj, tmp))
 
@@ -88,31 +120,8 @@ def train(a):
     """Train (or resume) the run in a.run. A resumed run keeps the scene split, width, batch, lr and
     loss of its checkpoint (a differing setting is an error); each epoch's shuffle is seeded by
     (seed, epoch), so a resumed run takes the same steps as one that never stopped."""
-    device = a.device or ("cuda" if torch.cuda.is_available() else "cpu")
-    os.makedirs(a.run, exist_ok=True)
-    ck_path = os.path.join(a.run, "checkpoint.pt")
-    ck = torch.load(ck_path, map_location=device, weights_only=False) if os.path.exists(ck_path) else None
     fixed = ("width", "batch", "lr", "lam", "seed")
-    if ck is not None:
-        cfg = ck["config"]
-        changed = [k for k in fixed if cfg[k] != getattr(a, k)]
-        if changed:
-            raise SystemExit(f"{ck_path}: trained with " + ", ".join(f"{k}={cfg[k]}" for k in changed)
-                             + "; resume with the same settings or use another --run")
-        tr_paths = [os.path.join(a.data, f) for f in cfg["train_scenes"]]
-        va_paths = [os.path.join(a.data, f) for f in cfg["val_scenes_files"]]
-        missing = [p for p in tr_paths + va_paths if not os.path.exists(p)]
-        if missing:
-            raise SystemExit(f"{ck_path}: its shards are gone from {a.data} ({os.path.basename(missing[0])}, ...)")
-    else:
-        paths = list_shards(a.data)
-        if not paths:
-            raise SystemExit(f"{a.data}: no shards (python -m learn.photon data --out {a.data})")
-        tr_paths, va_paths = split_scenes(paths, a.val_scenes)
-        cfg = {k: getattr(a, k) for k in fixed + ("val_scenes", "data")}
-        cfg["command"] = getattr(a, "command", None)
-        cfg["train_scenes"] = [os.path.basename(p) for p in tr_paths]
-        cfg["val_scenes_files"] = [os.path.basename(p) for p in va_paths]
+    device, ck, ck_path, cfg, tr_paths, va_paths = open_run(a, fixed, "python -m learn.photon data")
     tr, va = load_shards(tr_paths), load_shards(va_paths) if va_paths else None
     n = tr["target"].shape[0]
     if n < a.batch:

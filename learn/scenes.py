@@ -39,6 +39,7 @@ class _Builder:
         self.rng = rng
         self.groups = []  # (material name, vertices (n, 3), faces (m, 3))
         self.materials = {}
+        self.diffuse_only = False  # every surface Lambertian (the kind is still drawn: same layout)
 
     def material(self, body):
         name = f"m{len(self.materials)}"
@@ -110,7 +111,7 @@ class _Builder:
         kd = r.uniform(0.05, 0.85) * r.uniform(0.6, 1.0, 3)
         kind = r.choice(["diffuse", "glossy", "metal", "glass"], p=[0.6, 0.2, 0.1, 0.1] if glass_ok else
                         [0.67, 0.22, 0.11, 0.0])
-        if kind == "diffuse":
+        if kind == "diffuse" or self.diffuse_only:
             return self.material(f"Kd {kd[0]:.3f} {kd[1]:.3f} {kd[2]:.3f}")
         if kind == "glossy":
             ns = float(np.exp(r.uniform(np.log(10.0), np.log(2000.0))))
@@ -273,15 +274,17 @@ def _open(b):
     return {"camera": cam}, env
 
 
-def make_scene(seed, folder, width=64, height=64, kind=None):
+def make_scene(seed, folder, width=64, height=64, kind=None, diffuse_only=False):
     """Write the procedural scene of `seed` into `folder`; returns the OBJ path. `kind` (one of
-    KINDS) forces the layout; by default the seed picks it (rooms 50%, corridors 25%, open 25%)."""
+    KINDS) forces the layout; by default the seed picks it (rooms 50%, corridors 25%, open 25%).
+    `diffuse_only`: every surface Lambertian (the same layout and colours as without it)."""
     rng = np.random.default_rng([int(seed), 0x5CE4E])
     pick = rng.choice(KINDS, p=[0.5, 0.25, 0.25])
     kind = kind or pick
     if kind not in KINDS:
         raise ValueError(f"unknown scene kind {kind!r}; valid: " + ", ".join(KINDS))
     b = _Builder(rng)
+    b.diffuse_only = bool(diffuse_only)
     sidecar, env = {"room": _room, "corridor": _corridor, "open": _open}[kind](b)
     sidecar["film"] = {"width": int(width), "height": int(height)}
     sidecar["render"] = {"spp": 4, "max_depth": 8, "rr_depth": 5, "seed": int(seed)}

@@ -18,6 +18,35 @@ import numpy as np
 from tracer.imageio import replace_atomically
 
 
+def seed_range(text):
+    """'a:b' -> [a, ..., b - 1]; 'a' -> [a]."""
+    a, _, b = text.partition(":")
+    return list(range(int(a), int(b))) if b else [int(a)]
+
+
+def add_data_args(parser, seeds, out):
+    """The `data` command's common options: --seeds, --out, --workers, --scheduler."""
+    parser.add_argument("--seeds", type=seed_range, default=seed_range(seeds), help=f"scene seeds a:b (default {seeds})")
+    parser.add_argument("--out", default=out)
+    parser.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: one per core)")
+    parser.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
+
+
+def add_train_args(parser, data, run, width, epochs, patience, batch, lr, val_scenes):
+    """The `train` command's common options (defaults given)."""
+    parser.add_argument("--data", default=data)
+    parser.add_argument("--run", default=run)
+    parser.add_argument("--width", type=int, default=width)
+    parser.add_argument("--epochs", type=int, default=epochs)
+    parser.add_argument("--patience", type=int, default=patience)
+    parser.add_argument("--batch", type=int, default=batch)
+    parser.add_argument("--lr", type=float, default=lr)
+    parser.add_argument("--val-scenes", type=float, default=val_scenes, help="share of scenes held out for validation")
+    parser.add_argument("--max-steps", type=int, default=None, help="steps per epoch at most (tests)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--device", default=None, help="torch device (default: cuda when available, else cpu)")
+
+
 def shard_path(out_dir, seed):
     return os.path.join(out_dir, f"shard_{int(seed):05d}.npz")
 

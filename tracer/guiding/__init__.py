@@ -13,6 +13,7 @@ import copy
 from ..errors import SettingsError, unknown_name
 from .base import Guide
 from .histogram import GridGuide, PhotonGuide
+from .odis import OdisGuide
 from .pss import PSSGuide
 
 # name -> (factory or None for plain BSDF sampling, {setting: default})
@@ -21,6 +22,7 @@ REGISTRY = {
     "grid": (GridGuide, GridGuide.DEFAULTS),
     "photon": (PhotonGuide, PhotonGuide.DEFAULTS),
     "pss": (PSSGuide, PSSGuide.DEFAULTS),
+    "odis": (OdisGuide, OdisGuide.DEFAULTS),
 }
 
 

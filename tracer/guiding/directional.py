@@ -149,6 +149,15 @@ def map_pdf(dens, pscale, slot, n_theta, n_phi, d):
 WMAX = 65535  # the largest bin's weight
 
 
+@jit(inline="always")
+def quantised_weight(v, mx):
+    """A bin's integer weight: round(65535 v / mx) for finite positive v (mx the map's largest
+    finite value), else 0."""
+    if mx > 0.0 and v > 0.0 and math.isfinite(v):
+        return min(int(v / mx * WMAX + 0.5), WMAX)
+    return 0
+
+
 @kernel
 def _quantise(m, dens, wsum, pscale, usable):
     """Integer weights of the rows of m (S, K): round(65535 v / max), 0 where v is not finite and
@@ -162,10 +171,7 @@ def _quantise(m, dens, wsum, pscale, usable):
                 mx = v
         total = 0
         for k in range(K):
-            v = m[s, k]
-            w = 0
-            if mx > 0.0 and v > 0.0 and math.isfinite(v):
-                w = min(int(v / mx * WMAX + 0.5), WMAX)
+            w = quantised_weight(m[s, k], mx)
             dens[s, k] = w
             total += w
         wsum[s] = total

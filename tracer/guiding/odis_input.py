@@ -18,13 +18,30 @@ and two masks: `sampled` (the bin received a sample) and `valid` (some corner or
 the bin lies above the surface whose normal is the mean of c's own first-hit normals; all 0 when c
 has no sample, so that pixel takes BSDF sampling alone).
 """
+import math
+
 import numpy as np
 from numba import prange
 
 from .._jit import kernel
-from .directional import bin_direction, direction_bin
+from .directional import direction_bin
 
 N_CHANNELS = 9
+
+
+def bin_points(n_theta=32, n_phi=32):
+    """(K, 5, 3) directions of each bin's four corners and centre (the points that decide whether
+    a bin lies above a surface)."""
+    pts = ((0.0, 0.0), (0.0, 1.0), (1.0, 0.0), (1.0, 1.0), (0.5, 0.5))
+    k = np.arange(n_theta * n_phi)
+    row, col = k // n_phi, k % n_phi
+    out = np.empty((k.size, 5, 3))
+    for j, (s, t) in enumerate(pts):
+        z = np.clip(-1.0 + (row + s) * (2.0 / n_theta), -1.0, 1.0)
+        phi = -math.pi + (col + t) * (2.0 * math.pi / n_phi)
+        r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+        out[:, j] = np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+    return out
 
 
 def pixel_order(pix, n_pixels):
@@ -38,7 +55,7 @@ def pixel_order(pix, n_pixels):
 
 
 @kernel
-def _gather(order, start, dirs, chans, width, height, centres, k, n_theta, n_phi, feats, sampled, valid):
+def _gather(order, start, dirs, chans, width, height, centres, k, n_theta, n_phi, points, feats, sampled, valid):
     n_bins = n_theta * n_phi
     r = k // 2
     for m in prange(centres.shape[0]):
@@ -72,11 +89,19 @@ def _gather(order, start, dirs, chans, width, height, centres, k, n_theta, n_phi
         if start[c + 1] > start[c] and nx * nx + ny * ny + nz * nz > 0.0:
             for b in range(n_bins):
                 above = False
-                for st in ((0.0, 0.0), (0.0, 1.0), (1.0, 0.0), (1.0, 1.0), (0.5, 0.5)):
-                    d = bin_direction(b, n_theta, n_phi, st[0], st[1])
-                    if d[0] * nx + d[1] * ny + d[2] * nz > 0.0:
+                for j in range(5):
+                    if points[b, j, 0] * nx + points[b, j, 1] * ny + points[b, j, 2] * nz > 0.0:
                         above = True
                 valid[m, b] = 1 if above else 0
+
+
+_POINTS = {}
+
+
+def _points(n_theta, n_phi):
+    if (n_theta, n_phi) not in _POINTS:
+        _POINTS[(n_theta, n_phi)] = bin_points(n_theta, n_phi)
+    return _POINTS[(n_theta, n_phi)]
 
 
 def gather(pix, dirs, radiance, depth1, normal1, depth2, normal2, width, height, centres, k=11, n_theta=32,
@@ -105,15 +130,15 @@ def gather(pix, dirs, radiance, depth1, normal1, depth2, normal2, width, height,
     sampled = np.zeros((m, n_theta * n_phi), np.uint8)
     valid = np.zeros((m, n_theta * n_phi), np.uint8)
     _gather(order, start, np.ascontiguousarray(dirs, dtype=np.float64), chans, int(width), int(height), centres,
-            int(k), int(n_theta), int(n_phi), feats, sampled, valid)
+            int(k), int(n_theta), int(n_phi), _points(n_theta, n_phi), feats, sampled, valid)
     shape = (m, n_theta, n_phi)
     return feats.reshape(m, N_CHANNELS, n_theta, n_phi), sampled.reshape(shape), valid.reshape(shape)
 
 
 def initial_samples(records, n, origin):
     """The initial samples of one wave of n camera paths, from its records (traced with observe, no
-    splitting): {pix, dirs, radiance, depth1, normal1, depth2, normal2} for the paths whose first hit
-    sampled a direction (not a delta BSDF, not an emitter that ended the path).
+    splitting): {pix, x, dirs, radiance, depth1, normal1, depth2, normal2} for the paths whose first hit
+    sampled a direction (not a delta BSDF, not an emitter that ended the path); x is the first hit.
 
     Records [0, n) are the wave's first hits (integrator.trace_wave: bounce 0 reserves one entry per
     path); a first hit's second vertex is the record whose `prev` is it. depth1 is the distance from
@@ -134,7 +159,7 @@ def initial_samples(records, n, origin):
     has2 = j >= 0
     x1 = np.where(has2[:, None], records.x[np.maximum(j, 0)].astype(np.float64), x0)
     n1 = np.where(has2[:, None], records.n[np.maximum(j, 0)].astype(np.float64), 0.0)
-    return {"pix": records.pixel[idx].copy(), "dirs": records.wi[idx].astype(np.float64),
+    return {"pix": records.pixel[idx].copy(), "x": x0, "dirs": records.wi[idx].astype(np.float64),
             "radiance": records.radiance[idx].astype(np.float64),
             "depth1": np.linalg.norm(x0 - np.asarray(origin, dtype=np.float64), axis=1),
             "normal1": records.n[idx].astype(np.float64), "depth2": np.linalg.norm(x1 - x0, axis=1), "normal2": n1}

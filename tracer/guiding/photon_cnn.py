@@ -131,8 +131,9 @@ def parameter_count(model):
     return int(sum(p.numel() for p in model.parameters()))
 
 
-def flops_per_map(model, n_theta, n_phi):
-    """Floating-point operations (2 per multiply-add) of the convolutions for one map, all heads."""
+def count_flops(model, run):
+    """Floating-point operations (2 per multiply-add) of the convolutions (nn.Conv2d modules and
+    PartialConv) that `run()` performs with `model`."""
     total = []
 
     def conv_hook(mod, inp, out):  # nn.Conv2d called as a module (Conv, the heads)
@@ -144,26 +145,36 @@ def flops_per_map(model, n_theta, n_phi):
     hs = [m.register_forward_hook(conv_hook) for m in model.modules() if isinstance(m, nn.Conv2d)]
     hs += [m.register_forward_hook(partial_hook) for m in model.modules() if isinstance(m, PartialConv)]
     with torch.inference_mode():
-        model(torch.zeros(1, 5, n_theta, n_phi), heads=True)
+        run()
     for h in hs:
         h.remove()
     return int(sum(total))
 
 
-def load(name=NAME, folder=WEIGHTS_DIR):
-    """(model in eval mode, manifest dict) of the shipped weights `name`.pt / `name`.json."""
+def flops_per_map(model, n_theta, n_phi):
+    """Floating-point operations of the convolutions for one map, all heads."""
+    return count_flops(model, lambda: model(torch.zeros(1, 5, n_theta, n_phi), heads=True))
+
+
+def load_weights(build, name, folder, train_command):
+    """(model in eval mode, manifest dict) of the weights `name`.pt / `name`.json in folder; build
+    makes the module from the manifest's "model" settings."""
     path = os.path.join(folder, name + ".json")
     try:
         with open(path) as f:
             manifest = json.load(f)
     except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: no weights for the photon map network (train them with "
-                                f"python -m learn.photon train)") from None
-    model = PhotonUNet(**manifest["model"])
+        raise FileNotFoundError(f"{path}: no weights (train them with {train_command})") from None
+    model = build(**manifest["model"])
     state = torch.load(os.path.join(folder, name + ".pt"), map_location="cpu", weights_only=True)
     model.load_state_dict(state)
     model.eval()
     return model, manifest
+
+
+def load(name=NAME, folder=WEIGHTS_DIR):
+    """(model in eval mode, manifest dict) of the shipped weights `name`.pt / `name`.json."""
+    return load_weights(PhotonUNet, name, folder, "python -m learn.photon train")
 
 
 def infer(model, x, batch=64):
