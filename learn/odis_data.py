@@ -46,7 +46,7 @@ def shard_arrays(scene, seed, c):
 
     from tracer.film import Film
     from tracer.guiding.odis import LARGE_K, SMALL_K, pixel_normals, reference_maps
-    from tracer.guiding.odis_input import gather, initial_samples
+    from tracer.guiding.odis_input import first_sample, gather, initial_samples
     from tracer.render import make_context
     from tracer.session import trace_source
     from tracer.sources import CameraSource
@@ -80,9 +80,7 @@ def shard_arrays(scene, seed, c):
     feats, sampled, valid = gather(s["pix"], s["dirs"], s["radiance"], s["depth1"], s["normal1"], s["depth2"],
                                    s["normal2"], w, h, centres, k=k)
     # ground truth at one of each centre's own first hits
-    first = np.full(w * h, -1, np.int64)
-    first[s["pix"][::-1]] = np.arange(s["pix"].shape[0])[::-1]
-    j = first[centres]
+    j = first_sample(s["pix"], w * h)[centres]
     pctx = make_context(scene, seed=int(seed) + 1, max_depth=max(depth - 1, -1) if depth > 0 else -1,
                         threads=threads)
     gt = reference_maps(pctx, s["x"][j], s["normal1"][j], c["per_bin"], rng, int(seed))

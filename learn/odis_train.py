@@ -8,7 +8,7 @@ mixture the guide uses (kl_loss). Augmentation: a rotation of the world about th
 pole by a multiple of 90 degrees (the columns rolled by a quarter, the normals' x, y rotated).
 
 Validation holds out whole scenes (the last `val_scenes` share of the seeds) and decides early
-stopping by its L1. It also reports what the maps are for, the first bounce's variance: on each
+stopping by the training loss on them. It also reports what the maps are for, the first bounce's variance: on each
 validation map, with the reference radiance L and the cosine of the bin centre to the centre's
 normal, the second moment sum_b (L_b cos_b)^2 / p_b of the one-sample estimate under the 50/50
 mixture of the predicted map and cosine (BSDF) sampling, over the same under cosine sampling

@@ -77,8 +77,18 @@ class Film:
 def combine_films(films, kinds=None):
     """One image from independent renders of the same pixels: weighted by the inverse of each
     film's mean pixel variance (Mueller 2019), films with fewer than 2 spp in some pixel left out
-    unless nothing else has samples. Returns (image (H,W,3), variance of it, weights)."""
+    unless nothing else has samples. Films of kind "discard" never count (e.g. ODIS's initial
+    pass, rendered at another depth). Returns (image (H,W,3), variance of it, weights)."""
     kinds = kinds or ["final"] * len(films)
+    keep = [i for i, k in enumerate(kinds) if k != "discard"]
+    if len(keep) < len(films):
+        if not keep:
+            raise ValueError("combine_films: every film is of kind discard")
+        image, variance, w = combine_films([films[i] for i in keep], [kinds[i] for i in keep])
+        weights = [0.0] * len(films)
+        for j, i in enumerate(keep):
+            weights[i] = w[j]
+        return image, variance, weights
     usable = [f.count.size and f.count.min() >= 2 for f in films]
     if not any(usable):  # e.g. a 1-spp render: the films are summed sample by sample
         total = Film(films[0].width, films[0].height)

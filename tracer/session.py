@@ -54,7 +54,7 @@ class Session:
         self.ctx, self.guide, self.buf, self.stats = ctx, guide, buf, stats
         self.spp, self.time, self.t_start = spp, time, t_start
         self.bar, self.callback, self.snapshot, self.interrupted = bar, callback, snapshot, interrupted
-        self.films = []  # (film, kind) of every pass group: "pilot", "train", "final"
+        self.films = []  # (film, kind) of every pass group: "pilot", "train", "final", "discard"
         self.passes = []  # one entry per pass: spp, time, kind, film index, time_update
         self.sample0 = 0  # sample index the next pass starts at
         w, h = int(ctx.crop[2]), int(ctx.crop[3])
@@ -66,7 +66,8 @@ class Session:
         return _time.perf_counter() - self.t_start
 
     def new_film(self, kind):
-        """Open a film for a group of passes of `kind` ("pilot" films get no weight in the image)."""
+        """Open a film for a group of passes of `kind` ("pilot" films get no weight in the image
+        when another film has 2 spp everywhere, "discard" films never)."""
         film = Film(int(self.ctx.crop[2]), int(self.ctx.crop[3]))
         self.films.append((film, kind))
         return film

@@ -4,14 +4,16 @@ What each test can detect:
 - the per-pixel sampler contract on a fixed map (chi-square of the first-bounce directions a
   pixel samples, through the integrator's own locate-then-sample, against their pdf; the pdf
   integrates to 1; empty bins are never sampled): a wrong table, pdf or pixel lookup;
-- the network: values in bins outside the data mask (never sampled, or below the surface) do not
-  reach the output at all; the output is zero outside the valid hemisphere; the shipped weights
-  reproduce the outputs their manifest stored on a fixed input;
+- the network's input pipeline: values the gather left in bins outside the data mask (never
+  sampled, or below the surface) do not reach the output at all (odis_net.features zeroes them,
+  the network sees only features); the output is zero outside the valid hemisphere; the shipped
+  weights reproduce the outputs their manifest stored on a fixed input;
 - the blend of centre maps into pixel maps against a slow twin written here (wrong weights,
   wrong centres, a hemisphere cut from the wrong normal);
 - the render: its mean equals bsdf's on cornell and ajar (z-test, so a biased first-bounce
-  mixture, a pdf that is not the one sampled from, or initial samples left in the image would
-  show), the initial pass is a pilot; a scene with no light, and a camera that sees no surface,
+  mixture or a pdf that is not the one sampled from would show); the initial pass gets weight 0
+  in the image at every budget (its depth-3 samples would darken it); a scene with no light, and
+  a camera that sees no surface,
   fall back to BSDF sampling with the reason in the stats; 1 spp renders bsdf's samples exactly;
 - the ground truth of the training data in a closed box whose black walls emit Le: every bin
   above the surface reads luminance(Le) exactly, every bin below it 0.
@@ -162,14 +164,17 @@ def test_shipped_weights_reproduce_the_manifest():
     assert manifest["parameters"] == odis_net.parameter_count(model)
 
 
-def test_pixel_maps_match_a_slow_twin():
+@pytest.mark.parametrize("w,h,stride", [(11, 7, 4), (12, 3, 8), (5, 9, 16)])
+def test_pixel_maps_match_a_slow_twin(w, h, stride):
     from tracer.guiding.directional import build_tables
     from tracer.guiding.odis import SAME_NORMAL, N_THETA, _pixel_maps, _pixel_tables, bin_points, centre_axis
 
+    # (12, 3, 8): the last centre clipped to the film (x 4, 11) and one row of centres;
+    # (5, 9, 16): one centre (the film is smaller than the stride)
     rng = np.random.default_rng(7)
-    w, h, stride = 11, 7, 4
     cx, cy = centre_axis(w, stride), centre_axis(h, stride)
-    assert cx.tolist() == [2, 6, 10] and cy.tolist() == [2, 6]
+    want_axis = {(11, 4): [2, 6, 10], (7, 4): [2, 6], (12, 8): [4, 11], (3, 8): [2], (5, 16): [4], (9, 16): [8]}
+    assert cx.tolist() == want_axis[(w, stride)] and cy.tolist() == want_axis[(h, stride)]
     K = H * W
     cmaps = rng.random((cy.size * cx.size, K)).astype(np.float32)
     normal = rng.normal(size=(w * h, 3))
@@ -178,7 +183,7 @@ def test_pixel_maps_match_a_slow_twin():
     has = rng.random(w * h) > 0.1
     centres = (cy[:, None] * w + cx[None, :]).ravel()
     cnormal = normal[centres].copy()
-    cnormal[:3] = [0.0, 0.0, 1.0]
+    cnormal[:cx.size] = [0.0, 0.0, 1.0]
     pts = bin_points()
     out = np.empty((w * h, K), np.float32)
     _pixel_maps(cmaps, cx, cy, cnormal, w, 0, normal, has, pts, out)
@@ -189,10 +194,10 @@ def test_pixel_maps_match_a_slow_twin():
             continue
         fx = np.interp(x, cx, np.arange(cx.size))  # clamped at the ends
         fy = np.interp(y, cy, np.arange(cy.size))
-        i0, j0 = min(int(fx), cx.size - 2), min(int(fy), cy.size - 2)
+        i0, j0 = max(min(int(fx), cx.size - 2), 0), max(min(int(fy), cy.size - 2), 0)
         tx, ty = fx - i0, fy - j0
-        idx = [(j0, i0, (1 - tx) * (1 - ty)), (j0, i0 + 1, tx * (1 - ty)), (j0 + 1, i0, (1 - tx) * ty),
-               (j0 + 1, i0 + 1, tx * ty)]
+        i1, j1 = min(i0 + 1, cx.size - 1), min(j0 + 1, cy.size - 1)
+        idx = [(j0, i0, (1 - tx) * (1 - ty)), (j0, i1, tx * (1 - ty)), (j1, i0, (1 - tx) * ty), (j1, i1, tx * ty)]
         want = sum(wt * cmaps[j * cx.size + i].astype(np.float64) for j, i, wt in idx)
         same = all(cnormal[j * cx.size + i] @ normal[p] >= SAME_NORMAL for j, i, _ in idx)
         if not same:
@@ -228,10 +233,26 @@ def test_odis_mean_equals_bsdf_mean(case):
     st = g.stats()
     assert st["fallback"] is None and st["pixels_guided"] > 0.5 * w * h, st
     kinds = [p["kind"] for p in r.stats["passes"]]
-    assert kinds[0] == "pilot" and set(kinds[1:]) == {"final"} and r.stats["spp"] == spp
+    assert kinds[0] == "discard" and set(kinds[1:]) == {"final"} and r.stats["spp"] == spp
     m_g, v_g = image_mean(r)
     m_b, v_b = image_mean(b)
     assert_z(m_g, v_g + v_b, m_b, n_tests=3 * len(CASES), what=f"odis on {name} vs bsdf")
+
+
+@pytest.mark.parametrize("spp,initial,budget", [(2, 1, None), (5, 4, None), (None, 1, 0.01)])
+def test_the_initial_pass_never_enters_the_image(spp, initial, budget):
+    # combine_films drops a pilot film only when another has 2 spp everywhere; the initial pass
+    # (rendered at max_depth 3) must get weight 0 always, and with a budget the initial pass
+    # used up, one final pass still renders the image
+    scene = _scene("cornell", 16, 16)
+    g = make_guide("odis", initial=initial, stride=4)
+    r = tracer.render(scene, spp=spp, time=budget, guide=g, seed=5)
+    assert_clean(r)
+    passes = r.stats["passes"]
+    assert passes[0]["kind"] == "discard" and passes[0]["weight"] == 0.0
+    assert all(p["kind"] == "final" and p["weight"] > 0 for p in passes[1:]) and len(passes) > 1
+    if spp is not None:
+        assert r.stats["spp"] == spp
 
 
 def test_no_light_and_no_surface_fall_back(tmp_path):

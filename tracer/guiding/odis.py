@@ -6,7 +6,7 @@ The schedule of a render:
    a first-bounce direction is direct plus one-bounce indirect light; the weights' manifest may
    ask for another depth, what their training data was rendered with). Each first hit's sampled
    direction, that radiance and both hits' depth and normal are kept (odis_input.initial_samples);
-   the pass is a "pilot": its samples never enter the image (section 3.3).
+   its film is of kind "discard": its samples never enter the image (section 3.3).
 2. Maps: at every `stride`-th pixel in x and y (the centres), the samples of the k x k pixels
    around it are binned into its 32 x 32 world-space sphere grid (odis_input.gather), and the
    network (odis_net, shipped weights) reconstructs the map of every bin, in one batched torch
@@ -35,17 +35,18 @@ from ..errors import SettingsError, unknown_name
 from .base import Guide
 from .directional import FOUR_PI, MapTables, build_tables, quantised_weight
 from .histogram import _float, _int
-from .odis_input import bin_points, gather, initial_samples
+from .odis_input import _points, bin_points, first_sample, gather, initial_samples  # noqa: F401 (bin_points)
 from .spatial import empty_state
 
 N_THETA = N_PHI = 32
 INITIAL_DEPTH = 3  # direct plus one-bounce indirect light at the first hit (weights trained so)
 MAPS = ("network", "reference")
+CENTRE_CHUNK = 4096  # centres gathered and inferred at a time
 SMALL_K, LARGE_K = 11, 21  # the gather window (section 4.3): the larger one below 8 initial spp
 SAME_NORMAL = 0.9999  # a pixel whose four centres' normals are this close to its own keeps their masks
 
 
-BIN_POINTS = bin_points()
+BIN_POINTS = _points(N_THETA, N_PHI)
 
 
 def centre_axis(size, stride):
@@ -180,6 +181,8 @@ class _LuminanceSink:
         self.out = np.zeros(n)
 
     def add(self, pixel, radiance, aov, weight=None, spread=False):
+        # lights.luminance's weights, as a product: the shipped training data was made so, and
+        # a different rounding would change its bits
         lum = radiance @ np.array([0.2126, 0.7152, 0.0722])
         if weight is not None:
             lum = lum * weight
@@ -252,7 +255,7 @@ class OdisGuide(Guide):
             if self.k % 2 == 0:
                 raise SettingsError(f"guide setting k must be odd, got {self.k}")
         self.stride = _int("stride", s["stride"], 1)
-        self.alpha = _float("alpha", s["alpha"], 0.0, 1.0)
+        self.alpha = _float("alpha", s["alpha"], 1e-3, 1.0)  # > 0: the BSDF covers what the map cuts
         if not isinstance(s["weights"], str) or not s["weights"]:
             raise SettingsError(f"guide setting weights must be the name of shipped weights, got {s['weights']!r}")
         self.weights = s["weights"]
@@ -270,6 +273,7 @@ class OdisGuide(Guide):
     def prepare(self, scene, ctx):
         """A new render: forget the last render's maps and statistics."""
         self.ctx = ctx
+        self._render_depth = ctx.max_depth
         self._state = empty_state(N_THETA, N_PHI)
         self._samples = []
         self._waves = []
@@ -280,6 +284,7 @@ class OdisGuide(Guide):
     def warm_up(self, ctx):
         """Load the network and compile the gather and map kernels (outside the render's clock)."""
         self.ctx = ctx
+        self._render_depth = ctx.max_depth
         self._load()
         rng = np.random.default_rng(0)
         d = rng.normal(size=(4, 3))
@@ -328,26 +333,30 @@ class OdisGuide(Guide):
         if n0 < 1:
             reason = "no samples left for an initial pass"
         else:
-            film = session.new_film("pilot")
-            session.phase("initial")
+            film = session.new_film("discard")
             total = ctx.n_pixels * n0
             size = session.buf.size
             self._waves = [min(size, total - g0) for g0 in range(0, total, size)]
-            saved = ctx.max_depth
+            saved = self._render_depth = ctx.max_depth
             depth = self.initial_depth()
             ctx.max_depth = saved if depth <= 0 else depth if saved < 0 else min(saved, depth)
             try:
-                session.run_pass(film, n0, "pilot", learn=True)  # observe, then update builds the maps
+                session.run_pass(film, n0, "discard", learn=True)  # observe, then update builds the maps
             finally:
                 ctx.max_depth = saved
             reason = self._stats.get("fallback")
         self._stats["fallback"] = reason
         session.final_passes()
+        if session.final.count.max() == 0:  # the initial pass took the whole --time budget
+            session.run_pass(session.final, 1, "final")
 
     def observe(self, rec):
         """The first hits of one wave of the initial pass (copied: the buffer is reused)."""
         t0 = _time.perf_counter()
-        n = self._waves.pop(0)
+        n = self._waves.pop(0)  # this wave's paths: trace_source's split of the pass, predicted in schedule
+        head = rec.strategy[:n] >= 0
+        if n > rec.strategy.shape[0] or np.any(rec.path[:n][head] != np.flatnonzero(head)):
+            raise RuntimeError("odis: the initial pass's waves are out of step with its records")
         self._samples.append(initial_samples(rec, n, self.ctx.scene.camera.origin))
         self.time_learning += _time.perf_counter() - t0
 
@@ -382,18 +391,24 @@ class OdisGuide(Guide):
         model = self._load()
         cx, cy = centre_axis(w, self.stride), centre_axis(h, self.stride)
         centres = (cy[:, None] * w + cx[None, :]).ravel()
-        feats, sampled, valid = gather(s["pix"], s["dirs"], s["radiance"], s["depth1"], s["normal1"], s["depth2"],
-                                       s["normal2"], w, h, centres, k=self.window_size(), n_theta=N_THETA,
-                                       n_phi=N_PHI)
-        t0 = _time.perf_counter()
-        if self.maps == "network":
-            x = odis_net.features(feats, sampled, valid)
-            cmaps = odis_net.radiance_maps(model, x, valid, batch=self.batch)
-        else:
-            cmaps = self._reference(s, centres, w * h) * valid
-        self.time_inference += _time.perf_counter() - t0
+        cmaps = np.empty((centres.size, N_THETA, N_PHI), np.float32)
+        filled = total = 0
+        for c0 in range(0, centres.size, CENTRE_CHUNK):  # bounded memory: 76 KB of input per centre
+            c = centres[c0:c0 + CENTRE_CHUNK]
+            feats, sampled, valid = gather(s["pix"], s["dirs"], s["radiance"], s["depth1"], s["normal1"],
+                                           s["depth2"], s["normal2"], w, h, c, k=self.window_size(),
+                                           n_theta=N_THETA, n_phi=N_PHI)
+            filled += int(((sampled > 0) & (valid > 0)).sum())
+            total += int(valid.sum())
+            t0 = _time.perf_counter()
+            if self.maps == "network":
+                cmaps[c0:c0 + c.size] = odis_net.radiance_maps(model, odis_net.features(feats, sampled, valid), valid,
+                                                               batch=self.batch)
+            else:
+                cmaps[c0:c0 + c.size] = self._reference(s, c, w * h, c0) * valid
+            self.time_inference += _time.perf_counter() - t0
         self._stats.update(centres=int(centres.size), window=self.window_size(),
-                           centre_sparsity=float(((sampled > 0) & (valid > 0)).sum() / max(int(valid.sum()), 1)))
+                           centre_sparsity=float(filled / max(total, 1)))
         normal, has = pixel_normals(s["pix"], s["normal1"], w * h)
         cmaps = np.ascontiguousarray(cmaps.reshape(centres.size, -1), np.float32)
         P = w * h
@@ -403,19 +418,19 @@ class OdisGuide(Guide):
                       *out)
         return out, out.usable
 
-    def _reference(self, s, centres, n_pixels):
+    def _reference(self, s, centres, n_pixels, c0=0):
         """`maps reference`: probe-traced incident radiance at one first hit of each centre (the
         ground truth the network learns, at the render's depth less one: a diagnostic of what
         perfect maps would give; zero at centres without a sample)."""
-        first = np.full(n_pixels, -1, np.int64)
-        first[s["pix"][::-1]] = np.arange(s["pix"].shape[0])[::-1]
-        j = first[centres]
+        j = first_sample(s["pix"], n_pixels)[centres]
         ok = j >= 0
         pctx = copy.copy(self.ctx)
-        pctx.max_depth = self.ctx.max_depth - 1 if self.ctx.max_depth > 1 else -1
+        depth = self._render_depth
+        pctx.max_depth = depth - 1 if depth > 1 else -1
         out = np.zeros((centres.size, N_THETA, N_PHI), np.float32)
+        seed = self.ctx.seed * 4099 + c0  # distinct probes for every chunk of centres
         out[ok] = reference_maps(pctx, s["x"][j[ok]], s["normal1"][j[ok]], self.reference_per_bin,
-                                 np.random.default_rng(self.ctx.seed), self.ctx.seed)
+                                 np.random.default_rng(seed), seed)
         return out
 
     def memory_bytes(self):

@@ -8,7 +8,7 @@ c (clipped to the film) goes to the bin of its world-space direction on the full
 covers the same solid angle), without warping for the change of position. Each bin holds the mean
 of its samples' 9 channels:
 
-    0        incident radiance (the mean of R, G, B)
+    0        incident radiance (the guide's records give luminance; RGB input is averaged)
     1        depth of the first hit (camera to hit)
     2, 3, 4  shading normal at the first hit
     5        depth of the second hit (first hit to second; 0 where the direction escaped)
@@ -18,30 +18,41 @@ and two masks: `sampled` (the bin received a sample) and `valid` (some corner or
 the bin lies above the surface whose normal is the mean of c's own first-hit normals; all 0 when c
 has no sample, so that pixel takes BSDF sampling alone).
 """
-import math
-
 import numpy as np
 from numba import prange
 
-from .._jit import kernel
-from .directional import direction_bin
+from .._jit import jit, kernel
+from .directional import bin_direction, direction_bin
 
 N_CHANNELS = 9
 
 
+_CORNERS = ((0.0, 0.0), (0.0, 1.0), (1.0, 0.0), (1.0, 1.0), (0.5, 0.5))
+
+
+@jit
+def _bin_points(n_theta, n_phi, out):
+    for b in range(n_theta * n_phi):
+        for j in range(5):
+            d = bin_direction(b, n_theta, n_phi, _CORNERS[j][0], _CORNERS[j][1])
+            out[b, j, 0] = d[0]
+            out[b, j, 1] = d[1]
+            out[b, j, 2] = d[2]
+
+
 def bin_points(n_theta=32, n_phi=32):
-    """(K, 5, 3) directions of each bin's four corners and centre (the points that decide whether
-    a bin lies above a surface)."""
-    pts = ((0.0, 0.0), (0.0, 1.0), (1.0, 0.0), (1.0, 1.0), (0.5, 0.5))
-    k = np.arange(n_theta * n_phi)
-    row, col = k // n_phi, k % n_phi
-    out = np.empty((k.size, 5, 3))
-    for j, (s, t) in enumerate(pts):
-        z = np.clip(-1.0 + (row + s) * (2.0 / n_theta), -1.0, 1.0)
-        phi = -math.pi + (col + t) * (2.0 * math.pi / n_phi)
-        r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-        out[:, j] = np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+    """(K, 5, 3) directions of each bin's four corners and centre (directional.bin_direction, so
+    1e-9 of a bin inside it): the points that decide whether a bin lies above a surface."""
+    out = np.empty((n_theta * n_phi, 5, 3))
+    _bin_points(n_theta, n_phi, out)
     return out
+
+
+def first_sample(pix, n_pixels):
+    """(n_pixels,) index of each pixel's first sample in pix (-1 where it has none)."""
+    first = np.full(n_pixels, -1, np.int64)
+    first[pix[::-1]] = np.arange(pix.shape[0])[::-1]
+    return first
 
 
 def pixel_order(pix, n_pixels):

@@ -43,11 +43,14 @@ def compress(y):
     return np.log1p(MU * y) / math.log1p(MU)
 
 
+T_MAX = 3.0  # compressed values are clipped here before expanding: 1.25e7 x the mean, finite in float32
+
+
 def expand(t):
-    """The inverse of `compress` (t clipped at 0)."""
+    """The inverse of `compress` (t clipped to [0, T_MAX])."""
     if isinstance(t, torch.Tensor):
-        return torch.expm1(t.clamp(min=0.0) * math.log1p(MU)) / MU
-    return np.expm1(np.maximum(t, 0.0) * math.log1p(MU)) / MU
+        return torch.expm1(t.clamp(0.0, T_MAX) * math.log1p(MU)) / MU
+    return np.expm1(np.clip(t, 0.0, T_MAX) * math.log1p(MU)) / MU
 
 
 def features(feats, sampled, valid):
