@@ -32,7 +32,7 @@ from tracer.guiding.odis_net import OdisUNet, features, target
 
 from .odis_data import DEFAULTS as DATA_DEFAULTS
 from .odis_data import load_shards
-from .photon_train import _save, _write_json, open_run
+from .photon_train import _save, _write_json, open_run, start_training
 
 
 def prepare(data):
@@ -159,13 +159,7 @@ def train(a):
           f"{0 if va is None else va['x'].shape[0]} maps from {len(va_paths)} scenes; device {device}", flush=True)
     torch.manual_seed(a.seed)
     model = OdisUNet(a.width).to(device)
-    opt = torch.optim.Adam(model.parameters(), lr=a.lr)
-    state = {"epoch": 0, "history": [], "best": math.inf, "best_state": None, "bad": 0, "steps": 0}
-    if ck is not None:
-        model.load_state_dict(ck["model"])
-        opt.load_state_dict(ck["opt"])
-        state = ck["state"]
-        print(f"resumed {ck_path} at epoch {state['epoch']} (best validation {a.loss} {state['best']:.4f})")
+    opt, state = start_training(a, ck, ck_path, model, a.loss)
     t_start = time.perf_counter()
     while state["epoch"] < a.epochs and state["bad"] < a.patience:
         if a.minutes is not None and time.perf_counter() - t_start > 60.0 * a.minutes:

@@ -101,6 +101,19 @@ def open_run(a, fixed, data_command, defaults=None):
     return device, ck, ck_path, cfg, tr_paths, va_paths
 
 
+def start_training(a, ck, ck_path, model, label):
+    """(Adam over model at a.lr, the training state), both restored from the checkpoint ck (and the
+    model's weights with them) when resuming."""
+    opt = torch.optim.Adam(model.parameters(), lr=a.lr)
+    state = {"epoch": 0, "history": [], "best": math.inf, "best_state": None, "bad": 0, "steps": 0}
+    if ck is not None:
+        model.load_state_dict(ck["model"])
+        opt.load_state_dict(ck["opt"])
+        state = ck["state"]
+        print(f"resumed {ck_path} at epoch {state['epoch']} (best validation {label} {state['best']:.4f})")
+    return opt, state
+
+
 def _save(obj, path):
     replace_atomically(path, lambda tmp: torch.save(obj, tmp))
 
@@ -130,13 +143,7 @@ def train(a):
           f"{0 if va is None else va['target'].shape[0]} maps from {len(va_paths)} scenes; device {device}")
     torch.manual_seed(a.seed)
     model = PhotonUNet(a.width).to(device)
-    opt = torch.optim.Adam(model.parameters(), lr=a.lr)
-    state = {"epoch": 0, "history": [], "best": math.inf, "best_state": None, "bad": 0, "steps": 0}
-    if ck is not None:
-        model.load_state_dict(ck["model"])
-        opt.load_state_dict(ck["opt"])
-        state = ck["state"]
-        print(f"resumed {ck_path} at epoch {state['epoch']} (best validation L1 {state['best']:.4f})")
+    opt, state = start_training(a, ck, ck_path, model, "L1")
     config = cfg
     while state["epoch"] < a.epochs and state["bad"] < a.patience:
         t0 = time.perf_counter()

@@ -27,7 +27,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .photon_cnn import (WEIGHTS_DIR, Conv, PartialConv, _act, count_flops, load_weights,  # noqa: F401
+from .photon_cnn import (WEIGHTS_DIR, Conv, PartialConv, _act, count_flops, inner_levels, load_weights,  # noqa: F401
                          parameter_count)
 
 MU = 5000.0  # the mu-law's compression (section 4.2)
@@ -107,12 +107,7 @@ class OdisUNet(nn.Module):
         """x (S, 10, H, W) from features(), valid (S, H, W) {0, 1}; H and W divisible by 4. Returns
         the compressed radiance (S, H, W), zero outside valid."""
         e1, _ = self.e1(x, x[:, 9:10])
-        e1 = _act(e1)
-        e1 = e1 + _act(self.e1r(e1))
-        e2 = _act(self.e2(e1))
-        e2 = e2 + _act(self.e2r(e2))
-        d1 = _act(self.d1(torch.cat([F.interpolate(e2, scale_factor=2, mode="nearest"), e1], 1)))
-        d1 = d1 + _act(self.d1r(d1))
+        _, _, d1 = inner_levels(self, _act(e1))
         up = F.interpolate(d1, scale_factor=2, mode="nearest")
         return F.softplus(self.out(torch.cat([up, x[:, 0:1], x[:, 9:10]], 1)))[:, 0] * valid
 

@@ -112,12 +112,7 @@ class PhotonUNet(nn.Module):
         e0, m0 = self.e0(x, x[:, 4:5])
         e0 = _act(e0)
         e1, _ = self.e1(e0, m0)
-        e1 = _act(e1)
-        e1 = e1 + _act(self.e1r(e1))
-        e2 = _act(self.e2(e1))
-        e2 = e2 + _act(self.e2r(e2))
-        d1 = _act(self.d1(torch.cat([F.interpolate(e2, scale_factor=2, mode="nearest"), e1], 1)))
-        d1 = d1 + _act(self.d1r(d1))
+        e1, e2, d1 = inner_levels(self, _act(e1))
         d0 = _act(self.d0(torch.cat([F.interpolate(d1, scale_factor=2, mode="nearest"), e0], 1)))
         outs = [self.h2(e2), self.h1(d1), self.h0(d0)] if heads else [self.h0(d0)]
         maps = []
@@ -125,6 +120,19 @@ class PhotonUNet(nn.Module):
             s, _, h, w = o.shape
             maps.append((torch.softmax(o.reshape(s, h * w), dim=1) * (h * w)).reshape(s, h, w))
         return maps if heads else maps[0]
+
+
+def inner_levels(net, e1):
+    """The 1/2 and 1/4 levels of PhotonUNet and odis_net.OdisUNet, from the activated encoder
+    features e1 at 1/2: a residual block (net.e1r), a strided convolution to 1/4 (net.e2) and a
+    residual block (net.e2r), then upsampling with the skip link from e1 into net.d1 and a residual
+    block (net.d1r). Returns (e1, e2, d1)."""
+    e1 = e1 + _act(net.e1r(e1))
+    e2 = _act(net.e2(e1))
+    e2 = e2 + _act(net.e2r(e2))
+    d1 = _act(net.d1(torch.cat([F.interpolate(e2, scale_factor=2, mode="nearest"), e1], 1)))
+    d1 = d1 + _act(net.d1r(d1))
+    return e1, e2, d1
 
 
 def parameter_count(model):
