@@ -20,7 +20,24 @@ render() and the integrator ask of it:
 and the attributes below. A guide need not learn: one that returns a fixed state renders with it
 from the first sample (e.g. FrozenGuide, or a per-pixel map computed once).
 """
+import math
+
+import numpy as np
+
+from ..errors import SettingsError
 from .spatial import empty_state
+
+
+def _int(name, v, lo):
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+        raise SettingsError(f"guide setting {name} must be an integer >= {lo}, got {v!r}")
+    return int(v)
+
+
+def _float(name, v, lo, hi=math.inf):
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not (lo <= v <= hi):
+        raise SettingsError(f"guide setting {name} must be a number in [{lo}, {hi}], got {v!r}")
+    return float(v)
 
 
 class Guide:

@@ -62,7 +62,7 @@ from numba import prange
 from .._jit import jit, kernel
 from ..errors import SettingsError
 from ..splitting import WeightWindow, observe_outgoing, outgoing
-from .base import Guide
+from .base import Guide, _float, _int
 from .directional import bin_of_batch, build_tables
 from .photons import trace_photons
 from .reconstruct import RECONSTRUCTORS, make_reconstructor
@@ -150,18 +150,6 @@ def _normalised(a, rows, totals):
     return out
 
 
-def _int(name, v, lo):
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-        raise SettingsError(f"guide setting {name} must be an integer >= {lo}, got {v!r}")
-    return int(v)
-
-
-def _float(name, v, lo, hi=math.inf):
-    if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not (lo <= v <= hi):
-        raise SettingsError(f"guide setting {name} must be a number in [{lo}, {hi}], got {v!r}")
-    return float(v)
-
-
 class HistogramGuide(Guide):
     """Shared machinery of `grid` and `photon`: the Guide contract (prepare, state, observe, update,
     schedule) over a HierarchicalGrid of per-voxel directional histograms."""
@@ -213,6 +201,11 @@ class HistogramGuide(Guide):
         self.settings = s
         self.grid = None
 
+    @property
+    def time_inference(self):
+        """Seconds of network inference (the reconstructor's own count; 0 without a network)."""
+        return self.reconstructor.time_inference
+
     # --- the contract ----------------------------------------------------------------------------
     def prepare(self, scene, ctx):
         """Start learning for one render: ctx carries the accel, lights, seed, depths, film size."""
@@ -223,8 +216,7 @@ class HistogramGuide(Guide):
         self._pilot = []
         self.time_learning = 0.0  # observing records, photons, splits (update's first part)
         self.time_update = 0.0  # rebuilding the maps between passes: reconstruct, tables, weights
-        self.time_inference = 0.0  # network inference (reconstruct cnn); not in time_update
-        self.reconstructor.time_inference = 0.0
+        self.reconstructor.time_inference = 0.0  # network inference (reconstruct cnn); not in time_update
         self.reconstructor.maps_inferred = 0
         self.peak_memory = 0
         self.info = {"photons": 0, "deposits": 0, "photon_rays": 0, "vertices": 0}
@@ -356,7 +348,6 @@ class HistogramGuide(Guide):
         shape = maps.shape
         counts = g.count[slots].reshape(shape)
         rec = rc.reconstruct(maps, counts, counts > 0, g.prev[slots].reshape(shape), g.pcount[slots].reshape(shape))
-        self.time_inference = rc.time_inference
         g.set_maps(slots, build_tables(rec))
         g.prev[slots] = maps.reshape(slots.size, -1)
         g.pcount[slots] = counts.reshape(slots.size, -1)

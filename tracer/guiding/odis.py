@@ -32,9 +32,8 @@ from numba import prange
 
 from .._jit import jit, kernel
 from ..errors import SettingsError, unknown_name
-from .base import Guide
+from .base import Guide, _float, _int
 from .directional import FOUR_PI, MapTables, build_tables, quantised_weight
-from .histogram import _float, _int
 from .odis_input import _points, bin_points, first_sample, gather, initial_samples  # noqa: F401 (bin_points)
 from .spatial import empty_state
 

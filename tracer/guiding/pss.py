@@ -35,8 +35,7 @@ from ..film import Film
 from ..lights import luminance
 from ..rng import pss_dims, uniform_batch, primary_samples
 from ..sources import CameraSource
-from .base import Guide
-from .histogram import _float, _int
+from .base import Guide, _float, _int
 
 CONDITIONS = ("image", "pixel")
 TARGETS = ("relative", "luminance")
