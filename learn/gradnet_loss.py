@@ -21,17 +21,11 @@ taken on the compressed base image, whose range the bandwidth fits), and lambda'
 minimum, 0, at an image whose gradients are the given ones, equal to the base, and whose
 compressed values are a linear function of the features with derivative G.
 """
-import math
-
 import torch
 
-MU = 16.0
+from tracer.gradient.gradnet import MU, mu_law  # noqa: F401 (MU re-exported)
+
 SIGMA_B2 = 1.0 / 18.0
-
-
-def mu_law(x, mu=MU):
-    """The signed mu-law compressor of eq. 6."""
-    return torch.sign(x) * torch.log1p(mu * x.abs()) / math.log1p(mu)
 
 
 def data_loss(image, base):
