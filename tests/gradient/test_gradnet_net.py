@@ -4,7 +4,8 @@ What each test can detect: an image whose size is not a multiple of 8 failing or
 the wrong shape; colour channels mixed up in the batch (permuting R, G, B of every input must
 permute the output the same way, since each channel is one example); padding leaking into the
 crop's shape; the mu-law and its inverse not inverse to each other (signed values too); a
-G-branch of the wrong shape.
+G-branch of the wrong shape; an energy correction (eq. 13) that does not return the base image
+from any positive multiple of it, moves energy between channels, or divides by zero.
 """
 import numpy as np
 import pytest
@@ -47,3 +48,16 @@ def test_mu_law_round_trip_and_g_branch(model):
     assert data.shape == (3, 8, 16, 24) and grads.shape == (3, 2, 16, 24)
     with torch.inference_mode():
         assert model.derivatives(data, grads).shape == (3, 7, 16, 24)
+
+
+def test_energy_correction():
+    rng = np.random.default_rng(9)
+    base = rng.gamma(1.0, 1.0, (40, 50, 3))
+    scale = np.array([0.5, 2.0, 3.0])  # a reconstruction off by a factor per channel
+    np.testing.assert_allclose(gradnet.energy_correction(base * scale, base), base, rtol=1e-5)
+    # a smooth bias is taken out: the corrected image's local means are the base's
+    ramp = 1.0 + np.linspace(0, 1, 50)[None, :, None]
+    out = gradnet.energy_correction(base * ramp, base, radius=6, sigma=2.0)
+    assert np.abs(out.mean(axis=(0, 1)) / base.mean(axis=(0, 1)) - 1).max() < 0.02
+    zero = np.zeros_like(base)
+    np.testing.assert_array_equal(gradnet.energy_correction(zero, base), zero)  # nothing to scale: kept

@@ -12,7 +12,8 @@ run it.
 
 Inference (`reconstruct`): the three colour channels as a batch of 3 in one torch call under
 `torch.inference_mode()`, the image padded by replication to a multiple of 8 and cropped back;
-the output is expanded from the mu-law. torch is imported by this module only.
+the output is expanded from the mu-law. `energy_correction` is eq. 13's post-process. torch is
+imported by this module only.
 """
 import math
 
@@ -90,6 +91,24 @@ class GradNet(nn.Module):
     def derivatives(self, data, grads):
         """The G-branch: (B, 7, H, W) derivatives of the compressed image with respect to the features."""
         return self.g_branch(torch.cat([data, grads], 1))
+
+
+CORRECTION_RADIUS, CORRECTION_SIGMA = 45, 15.0  # eq. 13's Gaussian
+
+
+def energy_correction(image, base, radius=CORRECTION_RADIUS, sigma=CORRECTION_SIGMA):
+    """Eq. 13: image x (base * k) / (image * k), k a Gaussian of standard deviation `sigma` cut at
+    `radius` pixels, per colour channel (borders reflected); where image * k is not positive the
+    image is kept. (H, W, C) arrays; returns float32."""
+    from scipy.ndimage import gaussian_filter
+
+    img = np.asarray(image, np.float64)
+    kw = dict(sigma=(sigma, sigma, 0), truncate=radius / sigma, mode="reflect")
+    num = gaussian_filter(np.asarray(base, np.float64), **kw)
+    den = gaussian_filter(img, **kw)
+    ok = den > 0
+    scale = np.where(ok, num / np.where(ok, den, 1.0), 1.0)
+    return (img * scale).astype(np.float32)
 
 
 def inputs(indirect, dx, dy, albedo, normal, depth):
