@@ -27,12 +27,12 @@ import numpy as np
 import torch
 
 from tracer.guiding import odis_net
-from tracer.guiding.odis import bin_points
+from tracer.guiding.odis_input import bin_points
 from tracer.guiding.odis_net import OdisUNet, features, target
 
 from .odis_data import DEFAULTS as DATA_DEFAULTS
 from .odis_data import load_shards
-from .photon_train import _save, _write_json, open_run, start_training
+from .photon_train import _save, _write_json, end_epoch, open_run, optimiser_step, start_training
 
 
 def prepare(data):
@@ -180,29 +180,14 @@ def train(a):
             else:
                 g = torch.roll(torch.from_numpy(tg[idx]), turn * tg.shape[-1] // 4, -1).to(device)
                 loss = kl_loss(out, g, rotate_normals(torch.from_numpy(tn[idx]), turn).to(device))
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            losses.append(loss.item())
-            state["steps"] += 1
-            if a.max_steps is not None and len(losses) >= a.max_steps:
+            if optimiser_step(a, opt, loss, state, losses):
                 break
         ev = evaluate(model, va, device) if va is not None else {"val_l1": float(np.mean(losses)),
                                                                   "val_kl": float(np.mean(losses))}
         val = ev["val_" + a.loss]
         state["epoch"] += 1
         rec = dict(ev, epoch=state["epoch"], train_loss=float(np.mean(losses)), seconds=time.perf_counter() - t0)
-        state["history"].append(rec)
-        if val < state["best"]:
-            state["best"], state["bad"] = val, 0
-            state["best_state"] = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
-            state["best_epoch"] = state["epoch"]
-            state["best_eval"] = ev
-        else:
-            state["bad"] += 1
-        _save({"model": model.state_dict(), "opt": opt.state_dict(), "state": state, "config": cfg}, ck_path)
-        _write_json({"config": cfg, "history": state["history"], "best_val": state["best"],
-                     "best_epoch": state.get("best_epoch")}, os.path.join(a.run, "history.json"))
+        end_epoch(a, state, model, opt, cfg, ck_path, rec, val, "best_val", best_eval=ev)
         print(f"epoch {state['epoch']}: train {rec['train_loss']:.4f}  validation {a.loss} {val:.4f}  second moment "
               f"{ev.get('second_moment_ratio', math.nan):.3f} (input {ev.get('second_moment_ratio_input', math.nan):.3f}, "
               f"reference {ev.get('second_moment_ratio_reference', math.nan):.3f})  ({rec['seconds']:.0f} s)", flush=True)

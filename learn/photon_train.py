@@ -114,6 +114,33 @@ def start_training(a, ck, ck_path, model, label):
     return opt, state
 
 
+def optimiser_step(a, opt, loss, state, losses):
+    """One Adam step on `loss`, counted in state and losses; True when a.max_steps are done."""
+    opt.zero_grad()
+    loss.backward()
+    opt.step()
+    losses.append(loss.item())
+    state["steps"] += 1
+    return a.max_steps is not None and len(losses) >= a.max_steps
+
+
+def end_epoch(a, state, model, opt, cfg, ck_path, rec, val, best_key, **best_extra):
+    """After an epoch whose record is rec and validation figure val (lower is better): history,
+    best weights (with best_extra in state when they improve) or one more bad epoch, the
+    checkpoint and history.json (the best figure under best_key), both written atomically."""
+    state["history"].append(rec)
+    if val < state["best"]:
+        state["best"], state["bad"] = val, 0
+        state["best_state"] = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
+        state["best_epoch"] = state["epoch"]
+        state.update(best_extra)
+    else:
+        state["bad"] += 1
+    _save({"model": model.state_dict(), "opt": opt.state_dict(), "state": state, "config": cfg}, ck_path)
+    _write_json({"config": cfg, "history": state["history"], best_key: state["best"],
+                 "best_epoch": state.get("best_epoch")}, os.path.join(a.run, "history.json"))
+
+
 def _save(obj, path):
     replace_atomically(path, lambda tmp: torch.save(obj, tmp))
 
@@ -152,27 +179,13 @@ def train(a):
         for i in range(0, n - a.batch + 1, a.batch):
             x, y, s = batch_features(tr, order[i:i + a.batch])
             loss = loss_fn(model(x.to(device), heads=True), y.to(device), s.to(device), a.lam)
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            losses.append(loss.item())
-            state["steps"] += 1
-            if a.max_steps is not None and len(losses) >= a.max_steps:
+            if optimiser_step(a, opt, loss, state, losses):
                 break
         val = float(validate(model, va, device).mean()) if va is not None else float(np.mean(losses))
         state["epoch"] += 1
         rec = {"epoch": state["epoch"], "train_loss": float(np.mean(losses)), "val_l1": val,
                "seconds": time.perf_counter() - t0}
-        state["history"].append(rec)
-        if val < state["best"]:
-            state["best"], state["bad"] = val, 0
-            state["best_state"] = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
-            state["best_epoch"] = state["epoch"]
-        else:
-            state["bad"] += 1
-        _save({"model": model.state_dict(), "opt": opt.state_dict(), "state": state, "config": config}, ck_path)
-        _write_json({"config": config, "history": state["history"], "best_val_l1": state["best"],
-                     "best_epoch": state.get("best_epoch")}, os.path.join(a.run, "history.json"))
+        end_epoch(a, state, model, opt, config, ck_path, rec, val, "best_val_l1")
         print(f"epoch {state['epoch']}: train {rec['train_loss']:.4f}  validation L1 {val:.4f}  "
               f"({rec['seconds']:.0f} s)", flush=True)
     return state

@@ -167,7 +167,8 @@ def test_shipped_weights_reproduce_the_manifest():
 @pytest.mark.parametrize("w,h,stride", [(11, 7, 4), (12, 3, 8), (5, 9, 16)])
 def test_pixel_maps_match_a_slow_twin(w, h, stride):
     from tracer.guiding.directional import build_tables
-    from tracer.guiding.odis import SAME_NORMAL, N_THETA, _pixel_maps, _pixel_tables, bin_points, centre_axis
+    from tracer.guiding.odis import SAME_NORMAL, N_THETA, _pixel_maps, _pixel_tables, centre_axis
+    from tracer.guiding.odis_input import bin_points
 
     # (12, 3, 8): the last centre clipped to the film (x 4, 11) and one row of centres;
     # (5, 9, 16): one centre (the film is smaller than the stride)
@@ -301,7 +302,7 @@ def test_settings_are_checked():
 
 def test_ground_truth_in_an_emitting_black_box(tmp_path):
     from learn.odis_data import DEFAULTS, shard_arrays
-    from tracer.guiding.odis import bin_points
+    from tracer.guiding.odis_input import bin_points
 
     # Walls of albedo a = 1e-4 (a black wall samples no direction): from any point inside, every
     # direction above the surface sees Le, plus the one-bounce light a x Le (the whole enclosure

@@ -63,7 +63,7 @@ from .._jit import jit, kernel
 from ..errors import SettingsError
 from ..splitting import WeightWindow, observe_outgoing, outgoing
 from .base import Guide, _float, _int
-from .directional import bin_of_batch, build_tables
+from .directional import build_tables
 from .photons import trace_photons
 from .reconstruct import RECONSTRUCTORS, make_reconstructor
 from .spatial import HierarchicalGrid, empty_state

@@ -34,7 +34,7 @@ from .._jit import jit, kernel
 from ..errors import SettingsError, unknown_name
 from .base import Guide, _float, _int
 from .directional import FOUR_PI, MapTables, build_tables, quantised_weight
-from .odis_input import _points, bin_points, first_sample, gather, initial_samples  # noqa: F401 (bin_points)
+from .odis_input import _points, first_sample, gather, initial_samples
 from .spatial import empty_state
 
 N_THETA = N_PHI = 32
