@@ -6,8 +6,9 @@
 
 A method is a registered guide name, optionally with settings after a colon
 (`name:key=value,key=value`, as `--guide-opt` takes them), so variants of one guide can be compared,
-or a gradient-domain method (GRADIENT_METHODS: `gpt-l1`, `gpt-l2`, `gpt-replay-l1`: the
-integrator gpt with that shift and reconstruction; its solve counts in its time).
+or a gradient-domain method (GRADIENT_METHODS: `gpt-l1`, `gpt-l2`, `gpt-replay-l1`, `gpt-gradnet`
+(with eq. 13's energy correction), `gpt-gradnet-raw` (without): the integrator gpt with that shift
+and reconstruction; its solve, or the network's inference, counts in its time).
 
 A scene name is `scenes/<name>/<name>.obj`, or `<scene-dir>/<name>/scene.obj` for external
 scenes; its reference is the one `python -m bench.reference` wrote (scenes/<name>/reference.exr,
@@ -88,6 +89,8 @@ GRADIENT_METHODS = {
     "gpt-l1": {"integrator": "gpt", "recon": "l1"},
     "gpt-l2": {"integrator": "gpt", "recon": "l2"},
     "gpt-replay-l1": {"integrator": "gpt", "shift": "replay", "recon": "l1"},
+    "gpt-gradnet": {"integrator": "gpt", "recon": "gradnet"},
+    "gpt-gradnet-raw": {"integrator": "gpt", "recon": "gradnet", "recon_settings": {"correction": 0}},
 }
 
 
@@ -100,7 +103,7 @@ def method_spec(method):
 def render_args(method):
     """render() keyword arguments of a method: a gradient-domain one, or a guide with settings."""
     if method in GRADIENT_METHODS:
-        return dict(GRADIENT_METHODS[method])
+        return {k: (dict(v) if isinstance(v, dict) else v) for k, v in GRADIENT_METHODS[method].items()}
     name, settings = method_spec(method)
     return {"guide": name, "guide_settings": settings or None}
 

@@ -6,19 +6,17 @@
 
 Defaults are the shipped model's; the manifest records the commands that made it.
 """
-import argparse
 import os
 import sys
 
-from .shards import add_data_args, add_train_args
+from .shards import add_data_args, add_train_args, command_line, data_command, pipeline_parser
 
 DATA = os.path.join("learn", "data", "odis")
 RUNS = os.path.join("learn", "runs", "odis")
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m learn.odis", description=__doc__.splitlines()[0])
-    sub = p.add_subparsers(dest="cmd", required=True)
+    p, sub = pipeline_parser("python -m learn.odis", __doc__)
     d = sub.add_parser("data", help="generate shards")
     add_data_args(d, "0:400", DATA)
     d.add_argument("--size", type=int, default=None, help="film width and height")
@@ -37,22 +35,15 @@ def main(argv=None):
     e.add_argument("--name", default=None, help="weights name (default: odis; the guide's weights setting)")
     a = p.parse_args(argv)
     if a.cmd == "data":
-        import functools
-
         from .odis_data import make_shard
-        from .shards import run_shards
 
         cfg = {k: v for k, v in (("width", a.size), ("height", a.size), ("centres", a.centres),
                                  ("per_bin", a.per_bin), ("initial_depth", a.initial_depth)) if v is not None}
-        done = run_shards(functools.partial(make_shard, **cfg), a.seeds, a.out, workers=a.workers,
-                          scheduler=a.scheduler)
-        if done:
-            print(f"{len(done)} shards, {sum(done.values()) / len(done):.1f} s each in a worker")
-        return 0
+        return data_command(make_shard, a, cfg)
     from . import odis_train
 
     if a.cmd == "train":
-        a.command = " ".join(["python -m learn.odis"] + list(argv if argv is not None else sys.argv[1:]))
+        a.command = command_line("python -m learn.odis", argv)
         odis_train.train(a)
         return 0
     odis_train.export(a.run, a.out, a.name)

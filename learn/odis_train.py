@@ -32,7 +32,7 @@ from tracer.guiding.odis_net import OdisUNet, features, target
 
 from .odis_data import DEFAULTS as DATA_DEFAULTS
 from .odis_data import load_shards
-from .photon_train import _save, _write_json, end_epoch, open_run, optimiser_step, start_training
+from .photon_train import _save, _write_json, end_epoch, epochs_left, open_run, optimiser_step, start_training
 
 
 def prepare(data):
@@ -160,11 +160,7 @@ def train(a):
     torch.manual_seed(a.seed)
     model = OdisUNet(a.width).to(device)
     opt, state = start_training(a, ck, ck_path, model, a.loss)
-    t_start = time.perf_counter()
-    while state["epoch"] < a.epochs and state["bad"] < a.patience:
-        if a.minutes is not None and time.perf_counter() - t_start > 60.0 * a.minutes:
-            print(f"stopped after {a.minutes} minutes; run again to resume")
-            break
+    for _ in epochs_left(a, state):
         t0 = time.perf_counter()
         rng = np.random.default_rng([a.seed, state["epoch"]])
         order = rng.permutation(n)

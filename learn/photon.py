@@ -8,19 +8,17 @@
 
 Defaults are the shipped model's; the manifest records the commands that made it.
 """
-import argparse
 import os
 import sys
 
-from .shards import add_data_args, add_train_args
+from .shards import add_data_args, add_train_args, command_line, data_command, pipeline_parser
 
 DATA = os.path.join("learn", "data", "photon")
 RUNS = os.path.join("learn", "runs", "photon")
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m learn.photon", description=__doc__.splitlines()[0])
-    sub = p.add_subparsers(dest="cmd", required=True)
+    p, sub = pipeline_parser("python -m learn.photon", __doc__)
     d = sub.add_parser("data", help="generate shards")
     add_data_args(d, "0:40", DATA)
     d.add_argument("--n-gt", type=int, default=None, help="ground-truth photons per scene")
@@ -42,21 +40,14 @@ def main(argv=None):
     v.add_argument("--out", default=None, help="write the table (markdown) and JSON here")
     a = p.parse_args(argv)
     if a.cmd == "data":
-        import functools
-
         from .photon_data import make_shard
-        from .shards import run_shards
 
         cfg = {k: v for k, v in (("n_gt", a.n_gt), ("n0", a.n0), ("width", a.size), ("height", a.size)) if v}
-        done = run_shards(functools.partial(make_shard, **cfg), a.seeds, a.out, workers=a.workers,
-                          scheduler=a.scheduler)
-        if done:
-            print(f"{len(done)} shards, {sum(done.values()) / len(done):.1f} s each in a worker")
-        return 0
+        return data_command(make_shard, a, cfg)
     if a.cmd == "train":
         from .photon_train import train
 
-        a.command = " ".join(["python -m learn.photon"] + list(argv if argv is not None else sys.argv[1:]))
+        a.command = command_line("python -m learn.photon", argv)
         train(a)
         return 0
     if a.cmd == "export":

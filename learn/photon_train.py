@@ -114,6 +114,17 @@ def start_training(a, ck, ck_path, model, label):
     return opt, state
 
 
+def epochs_left(a, state):
+    """Yields once per epoch while the run has epochs (a.epochs), patience (a.patience) and, with
+    a.minutes, time left (counted from the first call)."""
+    t_start = time.perf_counter()
+    while state["epoch"] < a.epochs and state["bad"] < a.patience:
+        if getattr(a, "minutes", None) is not None and time.perf_counter() - t_start > 60.0 * a.minutes:
+            print(f"stopped after {a.minutes} minutes; run again to resume")
+            return
+        yield state["epoch"]
+
+
 def optimiser_step(a, opt, loss, state, losses):
     """One Adam step on `loss`, counted in state and losses; True when a.max_steps are done."""
     opt.zero_grad()

@@ -18,6 +18,33 @@ import numpy as np
 from tracer.imageio import replace_atomically
 
 
+def pipeline_parser(prog, doc):
+    """(parser, its subparsers) of a `python -m learn.<net>` command, described by doc's first line."""
+    import argparse
+
+    p = argparse.ArgumentParser(prog=prog, description=doc.splitlines()[0])
+    return p, p.add_subparsers(dest="cmd", required=True)
+
+
+def command_line(prog, argv):
+    """The command as typed: prog and argv (sys.argv's arguments when None)."""
+    import sys
+
+    return " ".join([prog] + list(argv if argv is not None else sys.argv[1:]))
+
+
+def data_command(make_shard, a, cfg):
+    """The `data` command: the missing shards of a.seeds into a.out, make_shard(seed, path, **cfg)
+    on Dask (a.workers, a.scheduler); prints their count and mean time. Returns 0."""
+    import functools
+
+    done = run_shards(functools.partial(make_shard, **cfg), a.seeds, a.out, workers=a.workers,
+                      scheduler=a.scheduler)
+    if done:
+        print(f"{len(done)} shards, {sum(done.values()) / len(done):.1f} s each in a worker")
+    return 0
+
+
 def seed_range(text):
     """'a:b' -> [a, ..., b - 1]; 'a' -> [a]."""
     a, _, b = text.partition(":")

@@ -40,8 +40,10 @@ def _parser():
                         "vertices, half-vector copy elsewhere) or replay (the same random numbers)")
     p.add_argument("--shift-roughness", type=float, default=0.001, metavar="R",
                    help="gpt, hybrid shift: vertices rougher than R (GGX alpha) are reconnected (default 0.001)")
-    p.add_argument("--recon", default="l1", help="gpt: screened Poisson reconstruction l1 (default), l2, or none "
-                                                 "(the base image)")
+    p.add_argument("--recon", default="l1", help="gpt: screened Poisson reconstruction l1 (default), l2, gradnet "
+                                                 "(learned), or none (the base image)")
+    p.add_argument("--recon-opt", action="append", default=[], metavar="KEY=VALUE",
+                   help="gpt: a setting of the reconstruction, repeatable (gradnet: weights=NAME, correction=0|1)")
     p.add_argument("--recon-alpha", type=float, default=0.2, metavar="A",
                    help="gpt: weight of the base image in the reconstruction (default 0.2)")
     budget = p.add_mutually_exclusive_group()
@@ -240,9 +242,14 @@ def _run(argv, warnings):
     if args.integrator not in gradient.INTEGRATORS:
         raise unknown_name("integrator", args.integrator, gradient.INTEGRATORS)
     if args.integrator == "gpt":
-        gradient.check_settings(args.shift, args.recon, args.recon_alpha, args.shift_roughness)
+        recon_settings = gradient.check_settings(args.shift, args.recon, args.recon_alpha, args.shift_roughness,
+                                                 _guide_opts(args.recon_opt, "--recon-opt"))[4]
         if args.guide != "bsdf":
             raise TracerError(f"--integrator gpt samples the BSDF only; --guide {args.guide} goes with --integrator path")
+    elif args.recon_opt:
+        raise TracerError("--recon-opt goes with --integrator gpt")
+    else:
+        recon_settings = None
     scene = load_scene(args.scene, **overrides)
     crop = _check_crop(crop, scene.width, scene.height) if crop is not None else None
     if ref is not None:
@@ -266,7 +273,7 @@ def _run(argv, warnings):
                     pixel_filter=args.filter, crop=crop,
                     wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet, integrator=args.integrator,
                     shift=args.shift, recon=args.recon, recon_alpha=args.recon_alpha,
-                    shift_roughness=args.shift_roughness)
+                    shift_roughness=args.shift_roughness, recon_settings=recon_settings)
     if ref is not None:
         result.stats["metrics"] = metrics.all_metrics(result.image, ref)
     exr, png, js = write_outputs(result, out, exposure=args.exposure, variance=args.variance)
@@ -284,13 +291,13 @@ def _run(argv, warnings):
     return EXIT_INTERRUPTED if s["interrupted"] else 0
 
 
-def _guide_opts(items):
-    """--guide-opt KEY=VALUE items as a dict; values parsed as int, float or left as text."""
+def _guide_opts(items, flag="--guide-opt"):
+    """--guide-opt (or `flag`) KEY=VALUE items as a dict; values parsed as int, float or left as text."""
     out = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key:
-            raise TracerError(f"--guide-opt {item!r}: expected KEY=VALUE")
+            raise TracerError(f"{flag} {item!r}: expected KEY=VALUE")
         for conv in (int, float):
             try:
                 out[key] = conv(value)

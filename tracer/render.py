@@ -80,7 +80,7 @@ def _int_setting(name, value, lo):
 def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=None, seed=None,
            accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
            guide_settings=None, pixel_filter="box", crop=None, integrator="path", shift="hybrid", recon="l1",
-           recon_alpha=0.2, shift_roughness=gradient.ROUGHNESS):
+           recon_alpha=0.2, shift_roughness=gradient.ROUGHNESS, recon_settings=None):
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
     spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
@@ -98,10 +98,12 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                samples as in the full render)
     integrator "path" (unidirectional path tracing) or "gpt" (gradient-domain path tracing,
                tracer.gradient: bsdf sampling only): shift "hybrid" (reconnecting vertices rougher
-               than shift_roughness) or "replay"; recon "l1", "l2" or "none"
-               (the base image), with weight recon_alpha on the base. The result's image is then
-               the reconstruction, its variance the base image's, and result.buffers holds base,
-               dx, dy (with variances), direct and indirect; stats time the passes and the solve
+               than shift_roughness) or "replay"; recon "l1", "l2" (screened Poisson, with weight
+               recon_alpha on the base), "gradnet" (the learned reconstruction; recon_settings
+               {"weights": name, "correction": 0 or 1}, tracer.gradient.RECON_DEFAULTS) or "none"
+               (the base image). The result's image is then the reconstruction, its variance the
+               base image's, and result.buffers holds base, dx, dy (with variances), direct,
+               indirect, albedo, normal and depth; stats time the passes and the solve
                (time_solve). `callback` gets the base image's film after each of gpt's passes.
 
     The method runs its own schedule of passes (guide.schedule(session), tracer.session): BSDF
@@ -132,7 +134,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     with _NumbaThreads(n_threads):  # every kernel of this render on n_threads, restored after
         return _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress,
                        callback, guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha,
-                       shift_roughness)
+                       shift_roughness, recon_settings)
 
 
 def _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop):
@@ -164,13 +166,16 @@ def make_context(scene, accel="embree", seed=None, max_depth=None, rr_depth=None
 
 
 def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress, callback,
-            guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha, shift_roughness):
+            guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha, shift_roughness,
+            recon_settings):
     """render() on n_threads Numba threads."""
     if integrator not in gradient.INTEGRATORS:
         raise unknown_name("integrator", integrator, gradient.INTEGRATORS)
     if integrator == "gpt":
-        shift, recon, recon_alpha, shift_roughness = gradient.check_settings(shift, recon, recon_alpha,
-                                                                             shift_roughness)
+        shift, recon, recon_alpha, shift_roughness, recon_settings = gradient.check_settings(
+            shift, recon, recon_alpha, shift_roughness, recon_settings)
+    elif recon_settings:
+        raise SettingsError("recon_settings go with integrator gpt")
         if not (isinstance(guide, str) and guide == "bsdf"):
             raise SettingsError(f"integrator gpt samples the BSDF only; a guide ({guide!r}) goes with integrator path")
     rs = scene.render
@@ -225,7 +230,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
                 "rr_depth": int(rr_depth), "guide": guide, "pixel_filter": pixel_filter, "crop": list(crop),
                 "wave_size": int(wave_size), "integrator": integrator, **provenance()}
     if integrator == "gpt":
-        settings.update(shift=shift, recon=recon, recon_alpha=recon_alpha)
+        settings.update(shift=shift, recon=recon, recon_alpha=recon_alpha, recon_settings=recon_settings)
         if shift == "hybrid":
             settings.update(shift_roughness=shift_roughness)
 
@@ -241,7 +246,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     try:
         sigint.install()
         if gfilms is not None:
-            reserve = gradient.solve_time_estimate(recon, crop[2], crop[3], recon_alpha) if time is not None else 0.0
+            reserve = gradient.solve_time_estimate(recon, crop[2], crop[3], recon_alpha, recon_settings) \
+                if time is not None else 0.0
             gradient.gradient_passes(ctx, buf, stats, gfilms, session.passes, spp=spp, time=time, t_start=t_start,
                                      reserve=reserve, before_wave=session._before_wave,
                                      after_wave=session._after_wave, shift=shift, roughness=shift_roughness,
@@ -260,7 +266,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
             bar.refresh()
             bar.close()
     if gfilms is not None:
-        return _gpt_result(gfilms, stats, snapshot, session, interrupted, recon, recon_alpha)
+        return _gpt_result(gfilms, stats, snapshot, session, interrupted, recon, recon_alpha, recon_settings)
     st = snapshot()
     st["interrupted"] = interrupted
     films = session.films or [(session.final, "final")]
@@ -280,14 +286,16 @@ def _gpt_after_pass(session, film):
     session.after_pass(film)
 
 
-def _gpt_result(gfilms, stats, snapshot, session, interrupted, recon, alpha):
+def _gpt_result(gfilms, stats, snapshot, session, interrupted, recon, alpha, recon_settings):
     """The RenderResult of a gradient-domain render: the reconstruction, and the buffers."""
     stats.samples = int(gfilms.base.count.sum())  # base samples (each traced five paths and five first hits)
     session.sample0 = sum(p["spp"] for p in session.passes)
-    image, buffers, t_solve = gradient.solve(gfilms, recon, alpha)
+    image, buffers, t_solve = gradient.solve(gfilms, recon, alpha, recon_settings)
     st = snapshot()
     st["interrupted"] = interrupted
     st["time_solve"] = t_solve  # included in time_total
+    if recon == "gradnet":
+        st["time_inference"] = t_solve  # the network and its energy correction
     return RenderResult(image.astype(np.float32), buffers["base_variance"], gfilms.base.aovs(), st, gfilms.base,
                         buffers)
 

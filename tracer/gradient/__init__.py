@@ -1,6 +1,10 @@
 """Gradient-domain path tracing (`render(..., integrator="gpt")`): a base image and its
 horizontal and vertical gradients from correlated offset paths (the hybrid shift: hybrid.py; random
-replay: replay.py), reconstructed by screened Poisson (poisson.py)."""
+replay: replay.py), reconstructed by screened Poisson (poisson.py) or by GradNet (gradnet.py, whose
+settings are RECON_DEFAULTS["gradnet"]: weights, the name of the shipped weights; correction, 1 to
+apply eq. 13's energy correction, 0 not to)."""
+import functools
+import re
 import time as _time
 
 import numpy as np
@@ -12,19 +16,53 @@ from .replay import GradientFilms, gradient_passes  # noqa: F401
 SHIFTS = ("hybrid", "replay")
 ROUGHNESS = 0.001  # the hybrid shift reconnects between vertices rougher than this
 INTEGRATORS = ("path", "gpt")
+RECONSTRUCTIONS = poisson.RECONSTRUCTIONS + ("gradnet",)
+RECON_DEFAULTS = {"gradnet": {"weights": "gradnet", "correction": 1}}
 
 
-def check_settings(shift, recon, alpha, roughness=ROUGHNESS):
-    """(shift, recon, alpha, roughness) checked: one clear error for each bad value."""
+@functools.lru_cache(maxsize=4)
+def gradnet_model(name):
+    """The GradNet weights `name` (tracer/weights/<name>.pt), loaded once per process."""
+    from . import gradnet
+
+    return gradnet.load(name)[0]
+
+
+def recon_settings(recon, opts=None):
+    """The settings of reconstruction `recon`: its defaults updated by opts, checked (GradNet's
+    weights are loaded here, so that a missing file fails before the render)."""
+    defaults = RECON_DEFAULTS.get(recon, {})
+    opts = dict(opts or {})
+    bad = sorted(set(opts) - set(defaults))
+    if bad:
+        raise SettingsError(f"reconstruction {recon!r} has no setting {bad[0]!r}; valid: "
+                            + (", ".join(sorted(defaults)) or "none"))
+    s = dict(defaults, **opts)
+    if recon == "gradnet":
+        if s["correction"] not in (0, 1) or isinstance(s["correction"], float):
+            raise SettingsError(f"recon setting correction must be 0 or 1, got {s['correction']!r}")
+        s["correction"] = int(s["correction"])
+        if not (isinstance(s["weights"], str) and re.fullmatch(r"[A-Za-z0-9_.-]+", s["weights"])):
+            raise SettingsError(f"recon setting weights must be the name of shipped weights, got {s['weights']!r}")
+        try:
+            gradnet_model(s["weights"])
+        except FileNotFoundError as e:
+            raise SettingsError(str(e)) from None
+    return s
+
+
+def check_settings(shift, recon, alpha, roughness=ROUGHNESS, recon_opts=None):
+    """(shift, recon, alpha, roughness, recon's settings) checked: one clear error for each bad
+    value."""
     if shift not in SHIFTS:
         raise unknown_name("shift", shift, SHIFTS)
     if isinstance(roughness, bool) or not isinstance(roughness, (int, float)) or not roughness >= 0:
         raise SettingsError(f"shift_roughness must be a number >= 0 (inf: never reconnect), got {roughness!r}")
-    if recon not in poisson.RECONSTRUCTIONS:
-        raise unknown_name("reconstruction", recon, poisson.RECONSTRUCTIONS)
+    if recon not in RECONSTRUCTIONS:
+        raise unknown_name("reconstruction", recon, RECONSTRUCTIONS)
     if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not (np.isfinite(alpha) and alpha > 0):
         raise SettingsError(f"recon_alpha must be a positive number, got {alpha!r}")
-    return shift, recon, float(alpha), float(roughness)
+    return shift, recon, float(alpha), float(roughness), recon_settings(recon, recon_opts)
 
 
 def warm_up(ctx, shift, roughness):
@@ -36,12 +74,22 @@ def warm_up(ctx, shift, roughness):
         hybrid.warm_up(ctx, WaveBuffers(1), roughness)
 
 
-def solve_time_estimate(recon, width, height, alpha):
+def solve_time_estimate(recon, width, height, alpha, opts=None):
     """Seconds a `recon` solve of a width x height RGB image will take: the solve of a noisy 64 x 64
     image (a smooth image, noise 0.3 on the base and 0.05 on the gradients) timed here, scaled by
-    the pixel count (the solvers' iteration counts are bounded; their DCTs grow as N log N)."""
+    the pixel count (the solvers' iteration counts are bounded; their DCTs grow as N log N); for
+    gradnet, its inference on a 128 x 128 image, scaled the same way (linear in the pixels)."""
     if recon == "none":
         return 0.0
+    if recon == "gradnet":
+        from . import gradnet
+
+        model = gradnet_model(recon_settings(recon, opts)["weights"])
+        z = np.zeros((128, 128, 3), np.float32)
+        gradnet.reconstruct(model, z, z, z, z, z, z[..., :1])
+        t0 = _time.perf_counter()
+        gradnet.reconstruct(model, z, z, z, z, z, z[..., :1])
+        return (_time.perf_counter() - t0) * (width * height) / (128.0 * 128.0)
     y, x = np.mgrid[0:64, 0:64] / 64.0
     img = np.repeat((np.sin(5 * x + 3 * y) + 1.5 + (x > 0.5))[:, :, None], 3, axis=2)
     rng = np.random.default_rng(0)
@@ -54,25 +102,48 @@ def solve_time_estimate(recon, width, height, alpha):
     return (_time.perf_counter() - t0) * (width * height) / (64.0 * 64.0)
 
 
-def solve(films, recon, alpha):
+def reconstruct_buffers(buffers, recon, alpha, opts=None):
+    """(image (H,W,3) float64: the reconstruction of buffers["indirect"] from it and its gradients
+    buffers["dx"], ["dy"] (and, for gradnet, the features albedo, normal, depth) plus
+    buffers["direct"]; seconds the solve or the network's inference with its energy correction
+    took). The buffers are those of a gpt render (solve's), so that one render can be
+    reconstructed every way."""
+    t0 = _time.perf_counter()
+    if recon == "gradnet":
+        from . import gradnet
+
+        s = recon_settings(recon, opts)
+        b = buffers
+        rec = gradnet.reconstruct(gradnet_model(s["weights"]), b["indirect"], b["dx"], b["dy"], b["albedo"],
+                                  b["normal"], b["depth"])
+        if s["correction"]:
+            rec = gradnet.energy_correction(rec, b["indirect"])
+        image = rec.astype(np.float64)
+    else:
+        image = poisson.reconstruct(recon, buffers["indirect"], buffers["dx"], buffers["dy"], alpha)
+    t_solve = _time.perf_counter() - t0
+    return image + buffers["direct"], t_solve
+
+
+def solve(films, recon, alpha, opts=None):
     """Reconstruct from GradientFilms: (image (H,W,3) float64, the reconstruction of the indirect
     light plus the direct buffer; buffers {name: float32 (H,W,3), depth (H,W,1)}: base,
     base_variance, dx, dx_variance, dy, dy_variance, direct, indirect, and the features of a
     learned reconstruction: albedo (at the first vertex that is not a delta BSDF), normal, depth
-    (divided by the largest, so in [0, 1]); seconds the solve took)."""
-    t0 = _time.perf_counter()
+    (divided by the largest, so in [0, 1]); seconds the solve (or the network's inference, with
+    its energy correction) took)."""
     indirect, dx, dy = films.indirect.mean(), films.dx.mean(), films.dy.mean()
-    image = poisson.reconstruct(recon, indirect, dx, dy, alpha) + films.direct.mean()
-    t_solve = _time.perf_counter() - t0
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
-    buffers = {"base": f32(films.base.mean()), "base_variance": f32(films.base.variance()),
-               "dx": f32(dx), "dx_variance": f32(films.dx.variance()), "dy": f32(dy),
-               "dy_variance": f32(films.dy.variance()), "direct": f32(films.direct.mean()),
-               "indirect": f32(indirect)}
     aovs = films.base.aovs()
     depth = aovs["depth"].astype(np.float64)
     finite = depth[np.isfinite(depth)]
     top = float(finite.max()) if finite.size and finite.max() > 0 else 1.0
-    buffers.update(albedo=aovs["albedo"], normal=aovs["normal"],
-                   depth=f32(np.clip(np.where(np.isfinite(depth), depth, top) / top, 0.0, 1.0)))
+    features = dict(albedo=aovs["albedo"], normal=aovs["normal"],
+                    depth=f32(np.clip(np.where(np.isfinite(depth), depth, top) / top, 0.0, 1.0)))
+    image, t_solve = reconstruct_buffers(dict(features, indirect=indirect, dx=dx, dy=dy, direct=films.direct.mean()),
+                                         recon, alpha, opts)
+    buffers = {"base": f32(films.base.mean()), "base_variance": f32(films.base.variance()),
+               "dx": f32(dx), "dx_variance": f32(films.dx.variance()), "dy": f32(dy),
+               "dy_variance": f32(films.dy.variance()), "direct": f32(films.direct.mean()),
+               "indirect": f32(indirect), **features}
     return image, buffers, t_solve

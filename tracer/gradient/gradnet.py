@@ -12,7 +12,7 @@ run it.
 
 Inference (`reconstruct`): the three colour channels as a batch of 3 in one torch call under
 `torch.inference_mode()`, the image padded by replication to a multiple of 8 and cropped back;
-the output is expanded from the mu-law. `energy_correction` is eq. 13's post-process. torch is
+the output is clipped to +-1e6 (T_MAX in the mu-law) and expanded. `energy_correction` is eq. 13's post-process. torch is
 imported by this module only.
 """
 import math
@@ -22,8 +22,12 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..guiding.photon_cnn import WEIGHTS_DIR, count_flops, load_weights, parameter_count  # noqa: F401
+
 MU = 16.0
 N_FEATURES = 7
+NAME = "gradnet"
+T_MAX = math.log1p(MU * 1e6) / math.log1p(MU)  # outputs are clipped to +-1e6 in linear radiance
 
 
 def mu_law(x, mu=MU):
@@ -55,10 +59,10 @@ class GradNet(nn.Module):
     dual skip links; `g_branch` the G-branch (see the module docstring). Width w: the first level's
     channels."""
 
-    def __init__(self, width=8, blocks=2):
+    def __init__(self, width=8, blocks=2, full_res=True):
         super().__init__()
         w = int(width)
-        self.width, self.blocks = w, int(blocks)
+        self.width, self.blocks, self.full_res = w, int(blocks), bool(full_res)
         chans = (w, 2 * w, 4 * w)
         self.enc_d = nn.ModuleList([nn.Conv2d(c_in, c_out, 3, stride=2, padding=1)
                                     for c_in, c_out in zip((1 + N_FEATURES,) + chans[:2], chans)])
@@ -67,7 +71,12 @@ class GradNet(nn.Module):
         self.res = nn.Sequential(*[_Residual(8 * w) for _ in range(self.blocks)])
         self.dec = nn.ModuleList([nn.ConvTranspose2d(16 * w, 2 * w, 4, stride=2, padding=1),
                                   nn.ConvTranspose2d(6 * w, w, 4, stride=2, padding=1),
-                                  nn.ConvTranspose2d(3 * w, 1, 4, stride=2, padding=1)])
+                                  nn.ConvTranspose2d(3 * w, w if self.full_res else 1, 4, stride=2, padding=1)])
+        if self.full_res:  # the last layer sees the full-resolution inputs and corrects the base
+            self.out = nn.Conv2d(w + 1 + N_FEATURES + 2, 1, 3, padding=1)
+            nn.init.zeros_(self.out.bias)
+            with torch.no_grad():
+                self.out.weight.mul_(0.1)
         self.g_branch = nn.Sequential(nn.Conv2d(3 + N_FEATURES, w, 3, padding=1), nn.LeakyReLU(0.01),
                                       nn.Conv2d(w, w, 3, padding=1), nn.LeakyReLU(0.01),
                                       nn.Conv2d(w, N_FEATURES, 3, padding=1))
@@ -84,13 +93,21 @@ class GradNet(nn.Module):
         h = self.res(torch.cat([d, g], 1))
         for k, deconv in enumerate(self.dec):
             h = deconv(torch.cat([h, ds[2 - k], gs[2 - k]], 1))
-            if k < 2:
+            if k < 2 or self.full_res:
                 h = _act(h)
+        if self.full_res:
+            h = data[:, :1] + self.out(torch.cat([h, data, grads], 1))
         return h
 
     def derivatives(self, data, grads):
         """The G-branch: (B, 7, H, W) derivatives of the compressed image with respect to the features."""
         return self.g_branch(torch.cat([data, grads], 1))
+
+
+def load(name=NAME, folder=None):
+    """(model in eval mode, manifest dict) of the weights `name`.pt / `name`.json in folder
+    (default: the shipped ones, WEIGHTS_DIR)."""
+    return load_weights(GradNet, name, folder or WEIGHTS_DIR, "python -m learn.gradnet train")
 
 
 CORRECTION_RADIUS, CORRECTION_SIGMA = 45, 15.0  # eq. 13's Gaussian
@@ -134,5 +151,5 @@ def reconstruct(model, indirect, dx, dy, albedo, normal, depth):
         if ph or pw:
             data = F.pad(data, (0, pw, 0, ph), mode="replicate")
             grads = F.pad(grads, (0, pw, 0, ph), mode="replicate")
-        out = expand(model(data, grads))[:, 0, :h, :w]
+        out = expand(model(data, grads).clamp(-T_MAX, T_MAX))[:, 0, :h, :w]
     return np.ascontiguousarray(out.numpy().transpose(1, 2, 0), np.float32)

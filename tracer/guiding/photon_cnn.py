@@ -140,17 +140,21 @@ def parameter_count(model):
 
 
 def count_flops(model, run):
-    """Floating-point operations (2 per multiply-add) of the convolutions (nn.Conv2d modules and
-    PartialConv) that `run()` performs with `model`."""
+    """Floating-point operations (2 per multiply-add) of the convolutions (nn.Conv2d and
+    nn.ConvTranspose2d modules and PartialConv) that `run()` performs with `model`."""
     total = []
 
     def conv_hook(mod, inp, out):  # nn.Conv2d called as a module (Conv, the heads)
         total.append(2 * out.numel() * mod.in_channels * mod.kernel_size[0] * mod.kernel_size[1])
 
+    def transposed_hook(mod, inp, out):  # every input value meets out_channels x k x k weights
+        total.append(2 * inp[0].numel() * mod.out_channels * mod.kernel_size[0] * mod.kernel_size[1])
+
     def partial_hook(mod, inp, out):  # PartialConv runs F.conv2d on its weight
         total.append(2 * out[0].numel() * mod.conv.in_channels * 9)
 
     hs = [m.register_forward_hook(conv_hook) for m in model.modules() if isinstance(m, nn.Conv2d)]
+    hs += [m.register_forward_hook(transposed_hook) for m in model.modules() if isinstance(m, nn.ConvTranspose2d)]
     hs += [m.register_forward_hook(partial_hook) for m in model.modules() if isinstance(m, PartialConv)]
     with torch.inference_mode():
         run()
