@@ -4,7 +4,7 @@
         --scene-dir ../shared/scenes --spp 32,128,512 --seeds 3
 
 For every scene, seed and spp: one `--integrator gpt --recon none` render, whose buffers are then
-reconstructed every way (tracer.gradient.reconstruct_buffers, each timed): `gpt-l1`, `gpt-l2`
+reconstructed every way (tracer.gradient.reconstruct_buffers on the float32 buffers, each timed): `gpt-l1`, `gpt-l2`
 (screened Poisson, alpha 0.2), `gpt-gradnet` (with eq. 13's energy correction), `gpt-gradnet-raw`
 (without), `gpt-base` (the noisy base image); and one `bsdf` path render at the same spp. A method's
 time is the gpt render's plus its reconstruction's (bsdf: its own render). The same samples under
@@ -72,6 +72,8 @@ def equal_time(records, method, t):
     spps = sorted({r["spp"] for r in records if r["method"] == method})
     ts = np.log([_median(records, method, s, "time_total") for s in spps])
     es = np.log([_median(records, method, s, "relMSE") for s in spps])
+    order = np.argsort(ts)  # np.interp needs increasing times
+    ts, es = ts[order], es[order]
     if len(ts) and method == "bsdf" and np.log(t) > ts[-1]:
         return float(np.exp(es[-1] + ts[-1] - np.log(t)))
     if not len(ts) or not ts[0] <= np.log(t) <= ts[-1]:
@@ -92,8 +94,9 @@ def summary(records, meta):
             l1, bsdf = _median(rs, "gpt-l1", spp, "relMSE"), _median(rs, "bsdf", spp, "relMSE")
             for m in METHODS:
                 e = _median(rs, m, spp, "relMSE")
+                ratio = lambda d: f"{e / d:.2f}" if d > 0 else "-"  # noqa: E731
                 lines.append(f"| {spp} | {m} | {_median(rs, m, spp, 'time_total'):.2f} | {_median(rs, m, spp, 'solve_s'):.3f} "
-                             f"| {e:.5f} | {e / l1:.2f} | {e / bsdf:.2f} | {_median(rs, m, spp, '1-SSIM'):.4f} |")
+                             f"| {e:.5f} | {ratio(l1)} | {ratio(bsdf)} | {_median(rs, m, spp, '1-SSIM'):.4f} |")
         lines += ["", "Equal time (relMSE interpolated at gpt-l1's times; bsdf extrapolated as 1 / time):", "",
                   "| time s | " + " | ".join(f"{m} /l1 | {m} /bsdf" for m in ("gpt-gradnet", "gpt-l2", "gpt-base")) + " |",
                   "|---" * 7 + "|"]

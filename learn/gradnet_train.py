@@ -85,6 +85,9 @@ def reference_share(data):
         with np.load(p) as z:
             has.append("ref" in z.files)
     k = sum(has)
+    if k == len(has):
+        raise SystemExit(f"{data}: every shard has references: nothing would be left to train on "
+                         "(make the training scenes without --reference-spp, or give --val-scenes)")
     if not k or not all(has[len(has) - k:]):
         raise SystemExit(f"{data}: the validation scenes are the shards with references, and they must be the "
                          "last seeds (python -m learn.gradnet data --seeds A:B --reference-spp N); or give --val-scenes")

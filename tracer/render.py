@@ -174,10 +174,10 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     if integrator == "gpt":
         shift, recon, recon_alpha, shift_roughness, recon_settings = gradient.check_settings(
             shift, recon, recon_alpha, shift_roughness, recon_settings)
-    elif recon_settings:
-        raise SettingsError("recon_settings go with integrator gpt")
         if not (isinstance(guide, str) and guide == "bsdf"):
             raise SettingsError(f"integrator gpt samples the BSDF only; a guide ({guide!r}) goes with integrator path")
+    elif recon_settings:
+        raise SettingsError("recon_settings go with integrator gpt")
     rs = scene.render
     max_depth, rr_depth, seed, crop = _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop)
     wave_size = _int_setting("wave_size", wave_size, 1)

@@ -120,3 +120,8 @@ def test_cli(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nosuch.json: no weights" in err[0]
     assert main([obj, "--recon-opt", "correction=0", "-q", "-o", str(tmp_path / "i.exr")]) == 2
+    assert "--recon-opt goes with --integrator gpt" in capsys.readouterr().err
+    assert main([obj, "--integrator", "gpt", "--recon", "gradnet", "--recon-opt", "weights=odis", "-q",
+                 "-o", str(tmp_path / "j.exr")]) == 2  # another network's weights
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'odis' are not GradNet weights" in err[0]

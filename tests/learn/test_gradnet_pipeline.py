@@ -68,17 +68,21 @@ def test_augmentation_keeps_the_gradients_the_images(k):
     yy, xx = np.unravel_index(np.argmax(t[0, 0]), (8, 8))
     oy, ox = np.unravel_index(np.argmax(img[0, 0]), (8, 8))
     np.testing.assert_array_equal(y[0, 9:, yy, xx], x[0, 9:, oy, ox])
-    if k == 0:
-        np.testing.assert_array_equal(y, x)
+    # the image itself goes where the symmetry sends it
+    want = img.transpose(0, 1, 3, 2) if k & 1 else img
+    want = want[..., ::-1] if k & 2 else want
+    want = want[..., ::-1, :] if k & 4 else want
+    np.testing.assert_array_equal(t, want)
 
 
 def test_resume_export_and_render(shards, tmp_path, monkeypatch):
     straight, resumed = str(tmp_path / "straight"), str(tmp_path / "resumed")
-    s0 = gradnet_train.train(_args(shards, straight, 2))
-    s1 = gradnet_train.train(_args(shards, resumed, 1))
-    assert s1["epoch"] == 1 and s1["steps"] > 0
-    st = gradnet_train.train(_args(shards, resumed, 2))
-    assert st["epoch"] == 2 and st["steps"] == s0["steps"] == 2 * s1["steps"]
+    s0 = gradnet_train.train(_args(shards, straight, 3))
+    s1 = gradnet_train.train(_args(shards, resumed, 2))
+    assert s1["epoch"] == 2 and s1["steps"] > 0
+    st = gradnet_train.train(_args(shards, resumed, 3))  # epoch 3 runs at the decayed rate
+    assert st["epoch"] == 3 and st["steps"] == s0["steps"] == 3 * s1["steps"] // 2
+    assert st["history"][2]["lr"] == pytest.approx(1e-3 * 0.95)
     a = torch.load(os.path.join(straight, "checkpoint.pt"), weights_only=False)
     b = torch.load(os.path.join(resumed, "checkpoint.pt"), weights_only=False)
     for k, v in a["model"].items():

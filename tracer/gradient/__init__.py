@@ -47,7 +47,10 @@ def recon_settings(recon, opts=None):
         try:
             gradnet_model(s["weights"])
         except FileNotFoundError as e:
-            raise SettingsError(str(e)) from None
+            raise SettingsError(str(e) if ".json" in str(e) else f"weights {s['weights']!r}: {e}") from None
+        except Exception as e:  # another network's weights, or a damaged file
+            raise SettingsError(f"weights {s['weights']!r} are not GradNet weights that load "
+                                f"({type(e).__name__}: {str(e).splitlines()[0][:120]})") from None
     return s
 
 
@@ -78,18 +81,18 @@ def solve_time_estimate(recon, width, height, alpha, opts=None):
     """Seconds a `recon` solve of a width x height RGB image will take: the solve of a noisy 64 x 64
     image (a smooth image, noise 0.3 on the base and 0.05 on the gradients) timed here, scaled by
     the pixel count (the solvers' iteration counts are bounded; their DCTs grow as N log N); for
-    gradnet, its inference on a 128 x 128 image, scaled the same way (linear in the pixels)."""
+    gradnet, its inference and energy correction on a 128 x 128 image, scaled the same way (linear
+    in the pixels)."""
     if recon == "none":
         return 0.0
     if recon == "gradnet":
         from . import gradnet
 
-        model = gradnet_model(recon_settings(recon, opts)["weights"])
+        s = recon_settings(recon, opts)
         z = np.zeros((128, 128, 3), np.float32)
-        gradnet.reconstruct(model, z, z, z, z, z, z[..., :1])
-        t0 = _time.perf_counter()
-        gradnet.reconstruct(model, z, z, z, z, z, z[..., :1])
-        return (_time.perf_counter() - t0) * (width * height) / (128.0 * 128.0)
+        b = dict(indirect=z, dx=z, dy=z, direct=z, albedo=z, normal=z, depth=z[..., :1])
+        reconstruct_buffers(b, recon, alpha, s)
+        return reconstruct_buffers(b, recon, alpha, s)[1] * (width * height) / (128.0 * 128.0)
     y, x = np.mgrid[0:64, 0:64] / 64.0
     img = np.repeat((np.sin(5 * x + 3 * y) + 1.5 + (x > 0.5))[:, :, None], 3, axis=2)
     rng = np.random.default_rng(0)
@@ -112,8 +115,12 @@ def reconstruct_buffers(buffers, recon, alpha, opts=None):
     if recon == "gradnet":
         from . import gradnet
 
+        import numba
+        import torch
+
         s = recon_settings(recon, opts)
         b = buffers
+        torch.set_num_threads(numba.get_num_threads())  # the render's thread count (render(threads=...))
         rec = gradnet.reconstruct(gradnet_model(s["weights"]), b["indirect"], b["dx"], b["dy"], b["albedo"],
                                   b["normal"], b["depth"])
         if s["correction"]:
