@@ -125,3 +125,20 @@ def test_cli(tmp_path, capsys):
                  "-o", str(tmp_path / "j.exr")]) == 2  # another network's weights
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "'odis' are not GradNet weights" in err[0]
+
+
+def test_bench_convergence_runs_gpt_gradnet():
+    """bench.convergence's gpt-gradnet and gpt-gradnet-raw are GradNet renders (with and without the
+    correction): their records time the network and score its image."""
+    from bench import convergence
+
+    scene = _scene("cornell", 16, 16)
+    ref = tracer.render(scene, spp=8, seed=9).image
+    recs = {}
+    for m in ("gpt-gradnet", "gpt-gradnet-raw"):
+        convergence.check_method(m)
+        recs[m] = convergence.run_one(scene, m, 0, ref, spp=2)
+        assert recs[m]["solve_s"] > 0 and recs[m]["nonfinite_samples"] == 0
+        assert math.isfinite(recs[m]["metrics"]["relMSE"])
+    assert recs["gpt-gradnet"]["metrics"]["relMSE"] != recs["gpt-gradnet-raw"]["metrics"]["relMSE"]
+    assert convergence.GRADIENT_METHODS["gpt-gradnet-raw"]["recon_settings"] == {"correction": 0}
