@@ -33,7 +33,7 @@ from tracer.gradient.gradnet import GradNet, expand, mu_law
 
 from .gradnet_data import DEFAULTS as DATA_DEFAULTS
 from .gradnet_loss import first_order_loss, g_loss, grad_loss, data_loss, lambda_schedule, total_loss
-from .shards import list_shards
+from .shards import list_shards, shard_config
 from .photon_train import _save, _write_json, end_epoch, epochs_left, open_run, optimiser_step, start_training
 
 BETAS = (0.5, 0.999)
@@ -246,17 +246,6 @@ def seconds_per_image(model, h, w, repeats=3):
     return float(np.median(times))
 
 
-def shard_config(path):
-    """The data config a shard was made with (DEFAULTS where the shard is gone)."""
-    import json
-
-    c = dict(DATA_DEFAULTS)
-    if os.path.exists(path):
-        with np.load(path) as z:
-            c.update(json.loads(str(z["config"])))
-    return c
-
-
 def seed_runs(names, flag):
     """[(first seed, last seed + 1, flag)] of the contiguous runs of seeds in the shard names."""
     seeds = sorted(int(f[6:11]) for f in names)
@@ -280,8 +269,8 @@ def export(run, out=None, name=None):
     model.eval()
     torch.set_num_threads(os.cpu_count() or 1)
     names = cfg["train_scenes"] + cfg["val_scenes_files"]
-    data_cfg, val_cfg = shard_config(os.path.join(cfg["data"], names[0])), \
-        shard_config(os.path.join(cfg["data"], cfg["val_scenes_files"][0]))
+    data_cfg = shard_config(os.path.join(cfg["data"], names[0]), DATA_DEFAULTS)
+    val_cfg = shard_config(os.path.join(cfg["data"], cfg["val_scenes_files"][0]), DATA_DEFAULTS)
     ref_opt = f" --reference-spp {val_cfg['reference_spp']}" if val_cfg["reference_spp"] else ""
     command = " && ".join(f"python -m learn.gradnet data --seeds {lo}:{hi}" + (ref_opt if val else "")
                           for lo, hi, val in (seed_runs(cfg["train_scenes"], False) + seed_runs(cfg["val_scenes_files"], True)))

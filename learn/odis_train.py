@@ -18,7 +18,6 @@ for the raw sparse input as the map and for the reference itself (the ceiling).
 A run folder keeps `checkpoint.pt` (model, optimiser, epoch, history, best weights; written
 through a temporary file each epoch) and `history.json`; training resumes from it.
 """
-import json
 import math
 import os
 import time
@@ -32,6 +31,7 @@ from tracer.guiding.odis_net import OdisUNet, features, target
 
 from .odis_data import DEFAULTS as DATA_DEFAULTS
 from .odis_data import load_shards
+from .shards import shard_config
 from .photon_train import _save, _write_json, end_epoch, epochs_left, open_run, optimiser_step, start_training
 
 
@@ -208,15 +208,6 @@ def inference_ms_per_1000(model, n=1024):
     return 1000.0 * (time.perf_counter() - t0) / n * 1000.0
 
 
-def data_config(shard):
-    """The data config a shard was made with (DEFAULTS where it is gone or predates a key)."""
-    cfg = dict(DATA_DEFAULTS)
-    if os.path.exists(shard):
-        with np.load(shard) as z:
-            cfg.update(json.loads(str(z["config"])))
-    return cfg
-
-
 def export(run, out=None, name=None):
     """The run's best weights into tracer/weights/<name>.pt (default odis) with the manifest
     <name>.json."""
@@ -234,7 +225,7 @@ def export(run, out=None, name=None):
     manifest = {
         "name": odis_net.NAME, "model": {"width": cfg["width"]}, "map": [32, 32],
         "data": {"command": f"python -m learn.odis data --seeds {seeds[0]}:{seeds[-1] + 1}",
-                 "config": data_config(os.path.join(cfg["data"], names[0])), "train_scenes": len(cfg["train_scenes"]),
+                 "config": shard_config(os.path.join(cfg["data"], names[0]), DATA_DEFAULTS), "train_scenes": len(cfg["train_scenes"]),
                  "validation_scenes": cfg["val_scenes_files"], "seed": cfg["seed"]},
         "train": {"command": cfg.get("command") or "python -m learn.odis train", "epochs": st["epoch"],
                   "best_epoch": st.get("best_epoch"), "batch": cfg["batch"], "lr": cfg["lr"]},

@@ -83,6 +83,19 @@ def save_npz(path, **arrays):
     replace_atomically(path, lambda tmp: np.savez_compressed(tmp, **arrays))
 
 
+def shard_config(path, defaults):
+    """The data config the shard at `path` was made with, over `defaults` (all of them where the
+    shard is gone or predates a key)."""
+    import json
+
+    cfg = dict(defaults)
+    if os.path.exists(path):
+        with np.load(path) as z:
+            if "config" in z.files:
+                cfg.update(json.loads(str(z["config"])))
+    return cfg
+
+
 def list_shards(out_dir):
     """Paths of the finished shards in out_dir, by seed."""
     if not os.path.isdir(out_dir):
