@@ -34,7 +34,8 @@ from tracer.gradient.gradnet import GradNet, expand, mu_law
 from .gradnet_data import DEFAULTS as DATA_DEFAULTS
 from .gradnet_loss import first_order_loss, g_loss, grad_loss, data_loss, lambda_schedule, total_loss
 from .shards import list_shards, shard_config
-from .photon_train import _save, _write_json, end_epoch, epochs_left, open_run, optimiser_step, start_training
+from .photon_train import (_save, _write_json, best_model, end_epoch, epochs_left, open_run, optimiser_step,
+                           start_training)
 
 BETAS = (0.5, 0.999)
 LR_DECAY, LR_EVERY = 0.95, 2
@@ -262,12 +263,7 @@ def export(run, out=None, name=None):
     """The run's best weights into tracer/weights/<name>.pt (default gradnet) with the manifest
     <name>.json."""
     out = out or gradnet.WEIGHTS_DIR
-    ck = torch.load(os.path.join(run, "checkpoint.pt"), map_location="cpu", weights_only=False)
-    st, cfg = ck["state"], ck["config"]
-    model = GradNet(cfg["width"], cfg["blocks"], not cfg["paper_layout"])
-    model.load_state_dict(st["best_state"])
-    model.eval()
-    torch.set_num_threads(os.cpu_count() or 1)
+    model, st, cfg = best_model(run, lambda c: GradNet(c["width"], c["blocks"], not c["paper_layout"]))
     names = cfg["train_scenes"] + cfg["val_scenes_files"]
     data_cfg = shard_config(os.path.join(cfg["data"], names[0]), DATA_DEFAULTS)
     val_cfg = shard_config(os.path.join(cfg["data"], cfg["val_scenes_files"][0]), DATA_DEFAULTS)

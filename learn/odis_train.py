@@ -32,7 +32,8 @@ from tracer.guiding.odis_net import OdisUNet, features, target
 from .odis_data import DEFAULTS as DATA_DEFAULTS
 from .odis_data import load_shards
 from .shards import shard_config
-from .photon_train import _save, _write_json, end_epoch, epochs_left, open_run, optimiser_step, start_training
+from .photon_train import (_save, _write_json, best_model, end_epoch, epochs_left, open_run, optimiser_step,
+                           start_training)
 
 
 def prepare(data):
@@ -212,12 +213,7 @@ def export(run, out=None, name=None):
     """The run's best weights into tracer/weights/<name>.pt (default odis) with the manifest
     <name>.json."""
     out = out or odis_net.WEIGHTS_DIR
-    ck = torch.load(os.path.join(run, "checkpoint.pt"), map_location="cpu", weights_only=False)
-    st, cfg = ck["state"], ck["config"]
-    model = OdisUNet(cfg["width"])
-    model.load_state_dict(st["best_state"])
-    model.eval()
-    torch.set_num_threads(os.cpu_count() or 1)
+    model, st, cfg = best_model(run, lambda c: OdisUNet(c["width"]))
     names = cfg["train_scenes"] + cfg["val_scenes_files"]
     seeds = sorted(int(f[6:11]) for f in names)
     x, v = check_input()

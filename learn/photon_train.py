@@ -219,15 +219,22 @@ def check_input(n_theta, n_phi, n=3, seed=0):
     return features(maps, counts, maps, np.floor(counts / 2))
 
 
-def export(run, out=None):
-    """The run's best weights into tracer/weights/photon_cnn.pt with the manifest photon_cnn.json."""
-    out = out or photon_cnn.WEIGHTS_DIR
+def best_model(run, build):
+    """(model with the run's best weights, in eval mode; the training state; the run's config) from
+    run/checkpoint.pt, the model made by build(config); torch on every core, for the export's timings."""
     ck = torch.load(os.path.join(run, "checkpoint.pt"), map_location="cpu", weights_only=False)
     st, cfg = ck["state"], ck["config"]
-    model = PhotonUNet(cfg["width"])
+    model = build(cfg)
     model.load_state_dict(st["best_state"])
     model.eval()
     torch.set_num_threads(os.cpu_count() or 1)
+    return model, st, cfg
+
+
+def export(run, out=None):
+    """The run's best weights into tracer/weights/photon_cnn.pt with the manifest photon_cnn.json."""
+    out = out or photon_cnn.WEIGHTS_DIR
+    model, st, cfg = best_model(run, lambda c: PhotonUNet(c["width"]))
     shards = [os.path.join(cfg["data"], f) for f in cfg["train_scenes"] + cfg["val_scenes_files"]]
     data_cfg = shard_config(shards[0]) if os.path.exists(shards[0]) else dict(DATA_DEFAULTS)
     seeds = sorted(int(os.path.basename(f)[6:11]) for f in shards)
