@@ -2,24 +2,46 @@
 
     python -m bench.throughput                       # Cornell box, 256x256, max_depth 8, rr_depth 5
     python -m bench.throughput --scenes ../shared/scenes/veach-ajar/scene.obj --spp 16
+    python -m bench.throughput --scenes open-1k,open-1m --accels embree --spp 64
+    python -m bench.throughput --vs-mitsuba          # side by side with Mitsuba 3 (optional extra)
+    python -m bench.throughput --load                # load_scene of the 1.3M-triangle OBJ: time, peak RSS
     python -m bench.throughput --json bench/results/throughput.json
+
+Scene names besides paths (bench.scenes, written on first use into bench/results/scenes):
+`open-1k` and `open-1m` (an icosphere of 1280 or 1.31M triangles on a floor under a quad light)
+and `mitsuba-cornell` (Mitsuba's own Cornell box exported to OBJ; needs mitsuba).
 
 Each scene is rendered once untimed (compiles, warms caches), then timed `--repeat` times; the
 fastest run is reported with the median beside it (shared 2-core machines vary by +-15% from
-run to run).
+run to run). With --vs-mitsuba, each scene is loaded in both renderers, each renders once
+untimed, then the two alternate `--repeat` times; the ratio is of the medians. Mitsuba's LLVM
+backend needs a recent libLLVM (Dr.Jit aborts with LLVM 14 or 15): point DRJIT_LIBLLVM_PATH at one.
 """
 import argparse
+import json
 import os
 import platform
+import subprocess
+import sys
 
 import numba
 
 import tracer
 
-from . import atomic
+from . import atomic, scenes
+
+NAMED = {"open-1k": lambda: scenes.open_scene(3), "open-1m": lambda: scenes.open_scene(8),
+         "mitsuba-cornell": scenes.mitsuba_cornell}
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CORNELL = os.path.join(ROOT, "scenes", "cornell", "cornell.obj")
+
+
+def scene_spec(name):
+    """bench.scenes dict for a scene name or an OBJ/JSON path (parts: None)."""
+    if name in NAMED:
+        return NAMED[name]()
+    return {"obj": name, "parts": None}
 
 
 def measure(path, accel, spp, max_depth, rr_depth, width, height, threads, repeat):
@@ -28,20 +50,98 @@ def measure(path, accel, spp, max_depth, rr_depth, width, height, threads, repea
         over["width"] = width
     if height:
         over["height"] = height
-    scene = tracer.load_scene(path, **over)
+    scene = tracer.load_scene(scene_spec(path)["obj"], **over)
     tracer.render(scene, spp=1, accel=accel, max_depth=max_depth, rr_depth=rr_depth, threads=threads)
     runs = [tracer.render(scene, spp=spp, accel=accel, max_depth=max_depth, rr_depth=rr_depth,
                           threads=threads).stats for _ in range(max(1, repeat))]
     speeds = sorted(r["msamples_per_s"] for r in runs)
     s = max(runs, key=lambda r: r["msamples_per_s"])
     return {
-        "scene": os.path.relpath(path, ROOT), "accel": accel, "width": scene.width, "height": scene.height,
+        "scene": path if path in NAMED else os.path.relpath(path, ROOT), "accel": accel, "width": scene.width, "height": scene.height,
         "triangles": scene.n_triangles, "spp": spp, "max_depth": max_depth, "rr_depth": rr_depth,
         "seconds": round(s["time_total"], 3), "msamples_per_s": round(s["msamples_per_s"], 3),
         "msamples_per_s_median": round(speeds[len(speeds) // 2], 3), "repeat": len(runs),
         "mrays_per_s": round(s["mrays_per_s"], 3), "rays_per_sample": round(s["rays"] / s["samples"], 2),
         "stages": {k: round(v, 3) for k, v in s["time_stages"].items()},
     }
+
+
+def vs_mitsuba(names, spp, max_depth, rr_depth, threads, repeat):
+    """Alternate our render (embree) and Mitsuba's on each scene; rows of Msamples/s."""
+    from . import mitsuba_side
+
+    rows = []
+    for name in names:
+        spec = scene_spec(name)
+        ours = tracer.load_scene(spec["obj"])
+        theirs = mitsuba_side.load(spec, spp, max_depth, rr_depth)
+        n = ours.width * ours.height * spp
+        kw = dict(spp=spp, max_depth=max_depth, rr_depth=rr_depth, threads=threads)
+        tracer.render(ours, **kw)
+        mitsuba_side.render_seconds(theirs, spp)
+        a, b, stages = [], [], []
+        for r in range(max(1, repeat)):
+            st = tracer.render(ours, seed=r, **kw).stats
+            a.append(st["msamples_per_s"])
+            stages.append(st["time_stages"])
+            b.append(n / mitsuba_side.render_seconds(theirs, spp, seed=r) / 1e6)
+        med = lambda x: sorted(x)[len(x) // 2]  # noqa: E731
+        rows.append({"scene": name, "triangles": ours.n_triangles, "spp": spp, "ours": med(a), "mitsuba": med(b),
+                     "ratio": med(a) / med(b), "ours_runs": a, "mitsuba_runs": b,
+                     "stages": {k: round(v, 3) for k, v in stages[a.index(med(a))].items()}})
+        print(f"{name} ({ours.n_triangles} triangles, {ours.width}x{ours.height}, {spp} spp): ours "
+              f"{med(a):.2f} Msamples/s, Mitsuba {med(b):.2f}: {med(a) / med(b):.2f}x "
+              f"(medians of {len(a)} alternated runs; ours {min(a):.2f}-{max(a):.2f}, Mitsuba {min(b):.2f}-{max(b):.2f})")
+    return rows
+
+
+_LOAD_OURS = """
+import json, resource, sys, time
+import tracer
+from tracer.bvh import make_accel
+t0 = time.perf_counter(); s = tracer.load_scene(sys.argv[1]); t1 = time.perf_counter()
+rss_load = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+acc = make_accel("embree", s.tri); t2 = time.perf_counter()
+print(json.dumps({"load_s": t1 - t0, "bvh_s": t2 - t1, "peak_rss_mb_load": rss_load / 1024,
+                  "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+_LOAD_MITSUBA = """
+import json, resource, sys, time
+from bench import mitsuba_side
+spec = json.loads(sys.argv[1])
+t0 = time.perf_counter(); scene = mitsuba_side.load(spec, 1, 8, 5); t1 = time.perf_counter()
+print(json.dumps({"load_s": t1 - t0, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+
+def _child(code, *args):
+    out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, cwd=ROOT,
+                         env=dict(os.environ, PYTHONPATH=ROOT))
+    if out.returncode != 0:
+        raise RuntimeError(f"child failed: {out.stderr.strip().splitlines()[-1:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def load_times(name, repeat, mitsuba):
+    """Fresh-process load of `name`: ours (load_scene, then the Embree build) and, with `mitsuba`,
+    Mitsuba's load_dict of the same parts (which builds its BVH too); peak RSS of each process."""
+    spec = scene_spec(name)
+    rows = []
+    for _ in range(max(1, repeat)):
+        row = {"ours": _child(_LOAD_OURS, spec["obj"])}
+        if mitsuba:
+            row["mitsuba"] = _child(_LOAD_MITSUBA, json.dumps(spec))
+        rows.append(row)
+    best = min(rows, key=lambda r: r["ours"]["load_s"])
+    o = best["ours"]
+    print(f"{name}: load_scene {o['load_s']:.2f} s (peak RSS {o['peak_rss_mb_load']:.0f} MB), + Embree build "
+          f"{o['bvh_s']:.2f} s (peak RSS {o['peak_rss_mb']:.0f} MB); best of {len(rows)} fresh processes")
+    if mitsuba:
+        m = min((r["mitsuba"] for r in rows), key=lambda r: r["load_s"])
+        print(f"    Mitsuba load_dict {m['load_s']:.2f} s (with its BVH; peak RSS {m['peak_rss_mb']:.0f} MB): "
+              f"load_scene {o['load_s'] / m['load_s']:.2f}x its time, RSS {o['peak_rss_mb_load'] / m['peak_rss_mb']:.2f}x "
+              f"(with our BVH {o['peak_rss_mb'] / m['peak_rss_mb']:.2f}x)")
+    return rows
 
 
 def main(argv=None):
@@ -56,11 +156,30 @@ def main(argv=None):
     p.add_argument("--threads", type=int, default=None)
     p.add_argument("--repeat", type=int, default=3, help="timed runs per scene and accel (best is reported)")
     p.add_argument("--json", default=None, help="also write the records to this file")
+    p.add_argument("--vs-mitsuba", action="store_true",
+                   help="render side by side with Mitsuba 3 (default scenes: mitsuba-cornell,open-1k,open-1m)")
+    p.add_argument("--load", action="store_true", help="time load_scene of open-1m (and Mitsuba's load, if present)")
     a = p.parse_args(argv)
     rows = []
     print(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} cores, numba threads "
           f"{a.threads or numba.config.NUMBA_NUM_THREADS}")
-    for path in a.scenes.split(","):
+    if a.vs_mitsuba or a.load:
+        from . import mitsuba_side
+
+        why = mitsuba_side.available()
+        if why and a.vs_mitsuba:
+            print(f"--vs-mitsuba needs mitsuba ({why}); pip install mitsuba==3.9.1", file=sys.stderr)
+            return 2
+        names = a.scenes.split(",") if a.scenes != CORNELL else (
+            ["mitsuba-cornell", "open-1k", "open-1m"] if a.vs_mitsuba else ["open-1m"])
+        if a.load:
+            rows += [{"load": n, "runs": load_times(n, a.repeat, why is None)} for n in names]
+        else:
+            rows += vs_mitsuba(names, a.spp, a.max_depth, a.rr_depth, a.threads, a.repeat)
+        names = []
+    else:
+        names = a.scenes.split(",")
+    for path in names:
         for accel in a.accels.split(","):
             row = measure(path, accel, a.spp, a.max_depth, a.rr_depth, a.width, a.height, a.threads, a.repeat)
             rows.append(row)

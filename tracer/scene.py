@@ -1,4 +1,4 @@
-"""Scenes: an OBJ + MTL (geometry through trimesh) and an optional JSON sidecar.
+"""Scenes: an OBJ + MTL (geometry through tracer.objread, or trimesh) and an optional JSON sidecar.
 
 `load_scene(path, **overrides)` takes either `name.obj` (with `name.json` beside it if
 present) or a JSON scene file that names its OBJ under the key `"obj"`. The sidecar says
@@ -27,6 +27,7 @@ import numpy as np
 from . import bsdfs
 from .camera import Camera
 from .errors import SceneError, SettingsError
+from .objread import read_obj, triangle_areas
 
 log = logging.getLogger("tracer")
 
@@ -176,16 +177,22 @@ def _number(where, value, kind=float, lo=None):
     return value
 
 
-def read_text(path, what):
-    """The text of an OBJ or MTL file: UTF-8 (with or without a BOM), else the encoding
-    charset_normalizer finds most likely (a Latin-1 comment is common in exported files)."""
+def _read_bytes(path, what):
     try:
         with open(path, "rb") as f:
-            data = f.read()
+            return f.read()
     except FileNotFoundError:
         raise SceneError(f"{path}: {what} file not found") from None
     except OSError as e:
         raise SceneError(f"{path}: cannot read {what} ({e.strerror})") from None
+
+
+def read_text(path, what, data=None):
+    """The text of an OBJ or MTL file (or of its bytes `data`, already read): UTF-8 (with or
+    without a BOM), else the encoding charset_normalizer finds most likely (a Latin-1 comment is
+    common in exported files)."""
+    if data is None:
+        data = _read_bytes(path, what)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -206,13 +213,14 @@ class ObjScan:
     usemtl: list
 
 
-def scan_obj(path):
+def scan_obj(path, data=None):
     """Validate an OBJ line by line before trimesh reads it, so that errors name the line.
 
     Checks that `v` lines hold three finite numbers and `f` lines hold vertex indices that
-    exist. Returns an ObjScan (text, `mtllib` file names, `usemtl` names).
+    exist. Returns an ObjScan (text, `mtllib` file names, `usemtl` names). `data`: the file's
+    bytes, if already read.
     """
-    text = read_text(path, "OBJ")
+    text = read_text(path, "OBJ", data)
     mtllibs, usemtl = [], {}
     nv = 0
     for lineno, line in enumerate(text.splitlines(), 1):
@@ -408,6 +416,19 @@ def _load_geometry(obj_path, scan):
     return np.concatenate(tris, axis=0), names
 
 
+def read_geometry(obj_path):
+    """(tri (F, 3, 3), [(usemtl name or None, face count)], mtllib names, usemtl names) of an
+    OBJ: through the parallel reader (tracer.objread) when the file is made of the statements it
+    reads, else checked line by line (errors name the line) and read by trimesh; both give the
+    same triangles in the same order."""
+    fast = read_obj(_read_bytes(obj_path, "OBJ"))  # (read_obj frees the bytes once parsed)
+    if fast is not None:
+        return fast
+    scan = scan_obj(obj_path)
+    tri, groups = _load_geometry(obj_path, scan)
+    return tri, groups, scan.mtllibs, scan.usemtl
+
+
 def load_scene(path, **overrides):
     """Load a scene; keyword overrides replace sidecar values (width, height, spp, ...).
 
@@ -443,14 +464,13 @@ def load_scene(path, **overrides):
             _check_keys(f"{sidecar_path}: {section}", sidecar[section], allowed)
 
     # Geometry and materials
-    scan = scan_obj(obj_path)
+    tri, groups, mtllibs, usemtl = read_geometry(obj_path)
     mtl = {}
-    for lib in scan.mtllibs:
+    for lib in mtllibs:
         mtl_path = os.path.join(os.path.dirname(obj_path), lib)
         if not os.path.isfile(mtl_path):
             raise SceneError(f"{obj_path}: MTL file {lib!r} not found (looked for {mtl_path})")
         mtl.update(parse_mtl(mtl_path, warnings))
-    tri, groups = _load_geometry(obj_path, scan)
     names = list(mtl)
     types, params, emissions = [], [], []
     for n in names:
@@ -475,8 +495,8 @@ def load_scene(path, **overrides):
             emissions.append(np.zeros(3))
         tri_material[start : start + count] = names.index(mname)
         start += count
-    undefined = [n for n in scan.usemtl if n in undefined]  # in the order the OBJ uses them
-    libs = ", ".join(scan.mtllibs)
+    undefined = [n for n in usemtl if n in undefined]  # in the order the OBJ uses them
+    libs = ", ".join(mtllibs)
     where = f"in {libs}" if libs else "(the OBJ names no MTL file)"
     overridden = set(sidecar.get("materials") or {})
     unreported = [n for n in undefined if n not in overridden]
@@ -499,16 +519,15 @@ def load_scene(path, **overrides):
     )
 
     # Degenerate triangles: counted, reported, skipped
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    lo, hi = tri.reshape(-1, 3).min(0), tri.reshape(-1, 3).max(0)
-    diag = float(np.linalg.norm(hi - lo))
-    keep = area2 > (1e-12 * diag) ** 2
+    area2, bounds = triangle_areas(tri)
+    keep = area2 > (1e-12 * float(np.linalg.norm(bounds[1] - bounds[0]))) ** 2
+    del area2
     if not np.all(keep):
         _warn(warnings, f"{obj_path}: skipped {int((~keep).sum())} zero-area triangle(s)")
         tri, tri_material = tri[keep], tri_material[keep]
-    if tri.shape[0] == 0:
-        raise SceneError(f"{obj_path}: every triangle has zero area")
-    bounds = np.stack([tri.reshape(-1, 3).min(0), tri.reshape(-1, 3).max(0)])
+        if tri.shape[0] == 0:
+            raise SceneError(f"{obj_path}: every triangle has zero area")
+        bounds = triangle_areas(tri)[1]
 
     # Film, render settings
     film = dict(sidecar.get("film") or {})

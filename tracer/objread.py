@@ -1,0 +1,402 @@
+"""A parallel OBJ reader for the common statements, giving what trimesh gives.
+
+`read_obj(data)` reads OBJ bytes made of `v x y z`, `f` (indices `a`, `a/b`, `a//c` or `a/b/c`,
+any number of vertices), `usemtl`, `mtllib`, `vn`, `vt`, `o`, `g`, `s`, comments and blank
+lines, in Numba kernels over the lines (no Python loop over vertices or faces). It returns the
+triangles and material groups in the order trimesh's loader produces them (materials in reverse
+order of their first face, faces in file order within each; an all-quad group split as
+[a b c] for every quad, then [c d a] for every quad; mixed groups quad by quad, larger polygons
+as fans), so that the scene, and every image rendered from it, is the same whichever reader ran.
+
+It returns None where it cannot promise that: another statement, a negative index, a vertex
+line that is not three plain numbers, a face line it cannot parse or with an index that is not
+yet defined, a group of polygons of one size above four, or text that is not UTF-8. The caller
+then goes the slow way (tracer.scene: a line-by-line check that names the bad line, and trimesh).
+
+Numbers are parsed exactly: a decimal with at most 18 significant digits and a power of ten
+within 10^+-22 is m * 10^e or m / 10^-e in one correctly rounded float64 operation (Clinger's
+fast path, exact when m < 2^53); any other is handed to the C library's strtod (correctly
+rounded in glibc, as Python's float() is).
+"""
+import ctypes
+
+import numpy as np
+from llvmlite import ir
+from numba import prange, types
+from numba.extending import intrinsic
+
+from ._jit import jit, kernel
+
+SKIP, VERT, FACE, USEMTL, MTLLIB, OTHER = 0, 1, 2, 3, 4, 5
+_STRTOD = ctypes.cast(ctypes.CDLL(None).strtod, ctypes.c_void_p).value
+_POW10 = np.array([10.0 ** k for k in range(23)])
+
+
+@intrinsic
+def _strtod(typingctx, fn, addr):
+    """double strtod(const char *addr, NULL) called at the address `fn`."""
+    sig = types.float64(fn, addr)
+
+    def codegen(context, builder, signature, args):
+        i64 = ir.IntType(64)
+        fnty = ir.FunctionType(ir.DoubleType(), [i64, i64])
+        ptr = builder.inttoptr(args[0], fnty.as_pointer())
+        return builder.call(ptr, [args[1], ir.Constant(i64, 0)])
+
+    return sig, codegen
+
+
+@jit
+def _space(c):
+    return c == 32 or c == 9 or c == 13
+
+
+@jit
+def _key(buf, s, e, word):
+    """Whether line [s, e) starts with `word` followed by a space or the line's end."""
+    n = len(word)
+    if e - s < n:
+        return False
+    for j in range(n):
+        if buf[s + j] != word[j]:
+            return False
+    return s + n == e or buf[s + n] == 32
+
+
+@kernel
+def classify(buf, starts, ends, kinds):
+    """kinds[l]: the statement of line l (SKIP, VERT, FACE, USEMTL, MTLLIB, or OTHER)."""
+    for ln in prange(starts.shape[0]):
+        s = starts[ln]
+        e = ends[ln]
+        k = OTHER
+        if s == e:
+            k = SKIP
+        else:
+            c0 = buf[s]
+            c1 = buf[s + 1] if e - s > 1 else 0
+            if _space(c0):
+                k = SKIP
+                for j in range(s, e):
+                    if not _space(buf[j]):
+                        k = OTHER
+                        break
+            elif c0 == 35:  # '#'
+                k = SKIP
+            elif c0 == 118:  # 'v'
+                if c1 == 32:
+                    k = VERT
+                elif (c1 == 110 or c1 == 116) and (e - s == 2 or buf[s + 2] == 32):  # vn, vt
+                    k = SKIP
+            elif c0 == 102 and c1 == 32:  # 'f '
+                k = FACE
+            elif (c0 == 111 or c0 == 103 or c0 == 115) and (e - s == 1 or c1 == 32):  # o, g, s
+                k = SKIP
+            elif _key(buf, s, e, np.array([117, 115, 101, 109, 116, 108], np.uint8)):  # usemtl
+                k = USEMTL
+            elif _key(buf, s, e, np.array([109, 116, 108, 108, 105, 98], np.uint8)):  # mtllib
+                k = MTLLIB
+        kinds[ln] = k
+
+
+@jit
+def _number(buf, j, e, addr, strtod):
+    """Parse the decimal at buf[j] (line end e; the buffer's address addr, strtod's address
+    strtod): (value, index after it, ok)."""
+    i = j
+    neg = False
+    if i < e and (buf[i] == 45 or buf[i] == 43):
+        neg = buf[i] == 45
+        i += 1
+    m = 0
+    digits = 0  # significant digits kept in m (at most 18: m stays below 2^63)
+    drop = 0  # integer digits beyond the 19 kept (each a factor of 10)
+    frac = 0  # digits after the point kept in m
+    seen = False
+    hard = False
+    while i < e and 48 <= buf[i] <= 57:
+        seen = True
+        if digits < 18:
+            if m > 0 or buf[i] != 48:
+                digits += 1
+            m = m * 10 + (buf[i] - 48)
+        else:
+            drop += 1
+            hard = True
+        i += 1
+    if i < e and buf[i] == 46:  # '.'
+        i += 1
+        while i < e and 48 <= buf[i] <= 57:
+            seen = True
+            if digits < 18:
+                if m > 0 or buf[i] != 48:
+                    digits += 1
+                m = m * 10 + (buf[i] - 48)
+                frac += 1
+            else:
+                hard = True
+            i += 1
+    if not seen:
+        return 0.0, i, False
+    ex = 0
+    if i < e and (buf[i] == 101 or buf[i] == 69):  # e, E
+        i += 1
+        eneg = False
+        if i < e and (buf[i] == 45 or buf[i] == 43):
+            eneg = buf[i] == 45
+            i += 1
+        if not (i < e and 48 <= buf[i] <= 57):
+            return 0.0, i, False
+        while i < e and 48 <= buf[i] <= 57:
+            if ex < 100000:
+                ex = ex * 10 + (buf[i] - 48)
+            i += 1
+        if eneg:
+            ex = -ex
+    if i < e and not _space(buf[i]):
+        return 0.0, i, False
+    p = ex - frac + drop
+    if hard or m > (1 << 53) or p > 22 or p < -22:
+        v = _strtod(strtod, addr + j)
+        return v, i, True
+    v = float(m)
+    if p >= 0:
+        v = v * _POW10[p]
+    else:
+        v = v / _POW10[-p]
+    return (-v if neg else v), i, True
+
+
+@kernel
+def parse_vertices(buf, starts, ends, lines, out, strtod):
+    """out[r] = the three numbers of `v` line lines[r] (strtod: the C function's address, an
+    argument so that the cached kernel holds no address of this process); returns how many lines
+    were not exactly three plain decimals."""
+    addr = buf.ctypes.data
+    bad = 0
+    for r in prange(lines.shape[0]):
+        ln = lines[r]
+        e = ends[ln]
+        j = starts[ln] + 1
+        ok = True
+        for q in range(3):
+            while j < e and _space(buf[j]):
+                j += 1
+            v, j, good = _number(buf, j, e, addr, strtod)
+            ok = ok and good
+            out[r, q] = v
+        while j < e and _space(buf[j]):
+            j += 1
+        if not ok or j != e:
+            bad += 1
+    return bad
+
+
+@jit
+def _index(buf, i, e):
+    """Unsigned integer at buf[i]: (value, index after it); value -1 if no digit."""
+    v = 0
+    seen = False
+    while i < e and 48 <= buf[i] <= 57:
+        if v < (1 << 40):
+            v = v * 10 + (buf[i] - 48)
+        i += 1
+        seen = True
+    return (v if seen else -1), i
+
+
+@jit
+def _face_line(buf, s, e, limit, out, o):
+    """Walk the face line [s, e): write its position indices (0-based) to out[o:] if out is long
+    enough; returns (vertex count, pattern, ok). Pattern: 1 a, 2 a/b, 3 a//c, 4 a/b/c, -1 mixed.
+    ok is False on a malformed token or an index outside 1..limit."""
+    j = s + 1
+    nvert = 0
+    pattern = 0
+    ok = True
+    while True:
+        while j < e and _space(buf[j]):
+            j += 1
+        if j >= e:
+            break
+        a, j = _index(buf, j, e)
+        pat = 1
+        if j < e and buf[j] == 47:  # '/'
+            j += 1
+            b, j = _index(buf, j, e)
+            pat = 2
+            if j < e and buf[j] == 47:
+                j += 1
+                c, j = _index(buf, j, e)
+                if c < 0:
+                    ok = False
+                pat = 4 if b >= 0 else 3
+            elif b < 0:
+                ok = False
+        if j < e and not _space(buf[j]):
+            ok = False
+            break
+        if a < 1 or a > limit:
+            ok = False
+        if pattern == 0:
+            pattern = pat
+        elif pattern != pat:
+            pattern = -1
+        if o + nvert < out.shape[0]:
+            out[o + nvert] = a - 1
+        nvert += 1
+    return nvert, pattern, ok
+
+
+@kernel
+def face_counts(buf, starts, ends, lines, vbefore, counts, patterns):
+    """counts[r], patterns[r] of face line lines[r]; returns how many lines are malformed or
+    name a vertex not defined before them (vbefore[r] is how many there are)."""
+    bad = 0
+    empty = np.empty(0, np.int64)
+    for r in prange(lines.shape[0]):
+        ln = lines[r]
+        n, pat, ok = _face_line(buf, starts[ln], ends[ln], vbefore[r], empty, 0)
+        counts[r] = n
+        patterns[r] = pat
+        if not ok or n < 3:
+            bad += 1
+    return bad
+
+
+@kernel
+def face_indices(buf, starts, ends, lines, offsets, out):
+    """The 0-based position indices of every face line, at out[offsets[r]:offsets[r + 1]]."""
+    for r in prange(lines.shape[0]):
+        ln = lines[r]
+        _face_line(buf, starts[ln], ends[ln], 1 << 62, out[: offsets[r + 1]], offsets[r])
+
+
+def _triangles(idx, offsets, counts):
+    """Triangles (T, 3) of the faces idx[offsets[r]:offsets[r] + counts[r]], in trimesh's order;
+    None for a group of polygons of one size above four."""
+    if counts.size == 0:
+        return np.zeros((0, 3), np.int64)
+    if counts.min() == counts.max():
+        c = int(counts[0])
+        rows = idx[offsets[:-1, None] + np.arange(c)] if c <= 4 else None
+        if c == 3:
+            return rows
+        if c == 4:
+            return np.concatenate([rows[:, [0, 1, 2]], rows[:, [2, 3, 0]]])
+        return None
+    ntri = counts - 2
+    face = np.repeat(np.arange(counts.size), ntri)
+    j = np.arange(face.size) - np.repeat(np.cumsum(ntri) - ntri, ntri)  # triangle j of its face
+    base = offsets[:-1][face]
+    quad = counts[face] == 4
+    a = np.where(quad & (j == 1), 2, 0)
+    b = np.where(quad & (j == 1), 3, j + 1)
+    c = np.where(quad & (j == 1), 0, j + 2)
+    return np.stack([idx[base + a], idx[base + b], idx[base + c]], axis=1)
+
+
+def read_obj(data):
+    """OBJ bytes -> (tri (F, 3, 3) float64, [(usemtl name or None, face count)], mtllib names,
+    usemtl names in order of first use), or None (see the module docstring)."""
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    if not data.isascii():
+        try:
+            data.decode("utf-8")
+        except UnicodeDecodeError:
+            return None
+    buf = np.frombuffer(data if data.endswith(b"\n") else data + b"\n", np.uint8)
+    ends = np.flatnonzero(buf == 10)
+    starts = np.empty_like(ends)
+    starts[0] = 0
+    starts[1:] = ends[:-1] + 1
+    kinds = np.empty(ends.size, np.int8)
+    classify(buf, starts, ends, kinds)
+    if (kinds == OTHER).any():
+        return None
+    vlines = np.flatnonzero(kinds == VERT)
+    flines = np.flatnonzero(kinds == FACE)
+    verts = np.empty((vlines.size, 3))
+    if parse_vertices(buf, starts, ends, vlines, verts, _STRTOD):
+        return None
+    vbefore = np.searchsorted(vlines, flines)  # vertices defined before each face line
+    counts = np.empty(flines.size, np.int64)
+    patterns = np.empty(flines.size, np.int8)
+    if face_counts(buf, starts, ends, flines, vbefore, counts, patterns):
+        return None
+    if patterns.size and (patterns.min() < 1 or patterns.min() != patterns.max()):
+        return None
+    offsets = np.zeros(flines.size + 1, np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    idx = np.empty(offsets[-1], np.int64)
+    face_indices(buf, starts, ends, flines, offsets, idx)
+
+    # usemtl and mtllib lines are few: read them in Python
+    names, mtllibs, first_use = [], [], {}
+    mlines = np.flatnonzero(kinds == USEMTL)
+    mtl_lines = np.flatnonzero(kinds == MTLLIB)
+    for ln in mlines:
+        name = data[starts[ln] + 6 : ends[ln]].decode("utf-8").strip()
+        if not name or name != " ".join(name.split()):
+            return None  # trimesh and tracer.scene would name it differently
+        names.append(name)
+        first_use.setdefault(name, None)
+    for ln in mtl_lines:
+        mtllibs.extend(data[starts[ln] + 6 : ends[ln]].decode("utf-8").split())
+    del data, buf, starts, ends, kinds  # the text's memory, before the triangles take theirs
+    # material of each face line: that of the last usemtl line before it (-1: none)
+    uniq = {n: k for k, n in enumerate(first_use)}
+    mat_of_line = np.array([uniq[n] for n in names] + [-1], np.int64)
+    face_mat = mat_of_line[np.searchsorted(mlines, flines) - 1]  # -1 picks the trailing -1
+    # groups in reverse order of their first face, as trimesh builds them
+    order = []
+    if face_mat.size:
+        seen, first = np.unique(face_mat, return_index=True)
+        order = list(seen[np.argsort(first)][::-1])
+    tris, groups = [], []
+    for g in order:
+        sel = np.flatnonzero(face_mat == g)
+        c = counts[sel]
+        o = np.zeros(sel.size + 1, np.int64)
+        np.cumsum(c, out=o[1:])
+        gidx = idx if sel.size == flines.size else idx[np.repeat(offsets[sel] - o[:-1], c) + np.arange(o[-1])]
+        t = _triangles(gidx, o, c)
+        if t is None:
+            return None
+        tris.append(t)
+        groups.append((list(first_use)[g] if g >= 0 else None, len(t)))
+    if not tris:
+        return None  # no faces: the slow path reports it
+    t = np.concatenate(tris) if len(tris) > 1 else tris[0]
+    return verts[t], groups, mtllibs, list(first_use)
+
+
+@kernel
+def _areas(tri, area2, box):
+    n = tri.shape[0]
+    nch = box.shape[0]
+    for c in prange(nch):
+        for a in range(3):
+            box[c, 0, a] = np.inf
+            box[c, 1, a] = -np.inf
+        for i in range(c * n // nch, (c + 1) * n // nch):
+            ux, uy, uz = tri[i, 1, 0] - tri[i, 0, 0], tri[i, 1, 1] - tri[i, 0, 1], tri[i, 1, 2] - tri[i, 0, 2]
+            vx, vy, vz = tri[i, 2, 0] - tri[i, 0, 0], tri[i, 2, 1] - tri[i, 0, 1], tri[i, 2, 2] - tri[i, 0, 2]
+            x = uy * vz - uz * vy
+            y = uz * vx - ux * vz
+            z = ux * vy - uy * vx
+            area2[i] = np.sqrt(x * x + y * y + z * z)
+            for k in range(3):
+                for a in range(3):
+                    box[c, 0, a] = min(box[c, 0, a], tri[i, k, a])
+                    box[c, 1, a] = max(box[c, 1, a], tri[i, k, a])
+
+
+def triangle_areas(tri):
+    """(|e1 x e2| per triangle (F,), bounds (2, 3): min and max corner) of triangles (F, 3, 3)
+    with finite vertices, in one parallel pass without temporaries."""
+    area2 = np.empty(tri.shape[0])
+    box = np.empty((64, 2, 3))
+    _areas(tri, area2, box)
+    return area2, np.stack([box[:, 0].min(axis=0), box[:, 1].max(axis=0)])
