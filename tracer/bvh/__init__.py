@@ -17,8 +17,12 @@ triangle's `ray_offsets` (below). Rays with a zero direction miss. Every backend
 `threads`, `scale`, `bounds` ((2, 3) float64: min and max corner), `centre` (the bounds' centre,
 which Embree subtracts before its float32 cast) and a `repr`.
 """
-import numpy as np
+import math
 
+import numpy as np
+from numba import prange
+
+from tracer._jit import kernel
 from tracer.errors import SettingsError, unknown_name
 
 ACCELS = ("embree", "numba")
@@ -56,14 +60,30 @@ def _check_tri(tri):
     return tri
 
 
+@kernel
+def _finite_box(v, box):
+    """box[c] = min and max corner of the finite rows of chunk c of v (N, 3); +-inf if none."""
+    n = v.shape[0]
+    nch = box.shape[0]
+    for c in prange(nch):
+        for a in range(3):
+            box[c, 0, a] = np.inf
+            box[c, 1, a] = -np.inf
+        for i in range(c * n // nch, (c + 1) * n // nch):
+            if math.isfinite(v[i, 0]) and math.isfinite(v[i, 1]) and math.isfinite(v[i, 2]):
+                for a in range(3):
+                    box[c, 0, a] = min(box[c, 0, a], v[i, a])
+                    box[c, 1, a] = max(box[c, 1, a], v[i, a])
+
+
 def _bounds(tri):
     """Bounding box (2, 3) of the triangles' finite vertices and its diagonal length (the scene
     scale, 1.0 for an empty or point-like scene)."""
-    v = tri.reshape(-1, 3)
-    v = v[np.isfinite(v).all(axis=1)]
-    if len(v) == 0:
+    box = np.empty((64, 2, 3))
+    _finite_box(tri.reshape(-1, 3), box)
+    bounds = np.stack([box[:, 0].min(axis=0), box[:, 1].max(axis=0)])
+    if not np.isfinite(bounds).all():
         return np.zeros((2, 3)), 1.0
-    bounds = np.stack([v.min(axis=0), v.max(axis=0)])
     scale = float(np.linalg.norm(bounds[1] - bounds[0]))
     return bounds, (scale if scale > 0.0 else 1.0)
 
