@@ -144,6 +144,19 @@ def load_times(name, repeat, mitsuba):
     return rows
 
 
+def stage_table(rows):
+    """Print rows (measure's or vs_mitsuba's) as one markdown table: seconds per stage of the best run."""
+    if not rows:
+        return
+    stages = [k for k in rows[0]["stages"] if any(r["stages"].get(k, 0.0) > 0 for r in rows)]
+    print("\n| scene | accel | Msamples/s | " + " | ".join(stages) + " |")
+    print("|---" * (3 + len(stages)) + "|")
+    for r in rows:
+        ms = r.get("msamples_per_s", r.get("ours"))
+        print(f"| {r['scene']} | {r.get('accel', 'embree')} | {ms:.2f} | "
+              + " | ".join(f"{r['stages'].get(k, 0.0):.3f}" for k in stages) + " |")
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench.throughput", description=__doc__.splitlines()[0])
     p.add_argument("--scenes", default=CORNELL, help="comma-separated scene paths (default: the Cornell box)")
@@ -176,6 +189,7 @@ def main(argv=None):
             rows += [{"load": n, "runs": load_times(n, a.repeat, why is None)} for n in names]
         else:
             rows += vs_mitsuba(names, a.spp, a.max_depth, a.rr_depth, a.threads, a.repeat)
+            stage_table(rows)
         names = []
     else:
         names = a.scenes.split(",")
@@ -184,13 +198,14 @@ def main(argv=None):
             row = measure(path, accel, a.spp, a.max_depth, a.rr_depth, a.width, a.height, a.threads, a.repeat)
             rows.append(row)
             st = row["stages"]
-            total = sum(st.values())
-            parts = ", ".join(f"{k} {v:.2f}s ({100 * v / total:.0f}%)" for k, v in st.items())
+            total = sum(st.values()) or 1.0
+            parts = ", ".join(f"{k} {v:.2f}s ({100 * v / total:.0f}%)" for k, v in st.items() if v > 0)
             print(f"{row['scene']} [{accel}] {row['width']}x{row['height']} {row['spp']} spp: "
                   f"{row['msamples_per_s']:.3f} Msamples/s (median of {row['repeat']}: "
                   f"{row['msamples_per_s_median']:.3f}), {row['mrays_per_s']:.2f} Mrays/s, "
                   f"{row['rays_per_sample']} rays/sample, {row['seconds']:.2f} s")
             print(f"    {parts}")
+    stage_table([r for r in rows if "stages" in r])
     if a.json:
         os.makedirs(os.path.dirname(os.path.abspath(a.json)), exist_ok=True)
         atomic.write_json(a.json, rows, indent=1)  # a temporary file renamed into place

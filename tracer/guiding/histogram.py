@@ -64,7 +64,7 @@ from ..errors import SettingsError
 from ..splitting import WeightWindow, observe_outgoing, outgoing
 from .base import Guide, _float, _int
 from .directional import build_tables
-from .photons import trace_photons
+from .photons import env_aim, trace_photons
 from .reconstruct import RECONSTRUCTORS, make_reconstructor
 from .spatial import HierarchicalGrid, empty_state
 
@@ -420,13 +420,58 @@ class PhotonGuide(HistogramGuide):
     name = "photon"
     neural_maps = True
     # why each default: docs/guiding.md, "Defaults and where they were measured"
+    # aim_env: environment photons start only where camera paths escaped (photons.EnvAim)
     DEFAULTS = dict(COMMON, split_c=4000.0, sigma=1.0, photons_per_pixel=2.0, light_guiding=0.0, split=2.0, window=3.0,
-                    window_low=0.05)
+                    window_low=0.05, aim_env=1)
+    ESCAPES_PER_WAVE = 16384  # camera records a wave tests for escapes, at most
+    ESCAPES_MAX = 200000  # escaped rays kept
 
     def __init__(self, **settings):
         super().__init__(**settings)
         self.photons_per_pixel = _float("photons_per_pixel", self.settings["photons_per_pixel"], 0.0, 1e6)
         self.light_guiding = _float("light_guiding", self.settings["light_guiding"], 0.0, 0.95)
+        self.aim_env = bool(_int("aim_env", self.settings["aim_env"], 0))
+
+    def prepare(self, scene, ctx):
+        super().prepare(scene, ctx)
+        self.info.update(env_photons=0, env_photons_traced=0, env_photons_inside=0, escapes=0)
+        self._escapes = []
+
+    def observe(self, rec):
+        super().observe(rec)
+        t0 = time.perf_counter()
+        self._collect_escapes(rec)
+        self.time_learning += time.perf_counter() - t0
+
+    def _collect_escapes(self, rec):
+        """Camera vertices whose sampled direction leaves the scene: traced again here (at most
+        ESCAPES_PER_WAVE a wave, ESCAPES_MAX in all), for aim_env."""
+        ctx = self.ctx
+        if not self.aim_env or not ctx.lights.p_env > 0.0 or self.info["escapes"] >= self.ESCAPES_MAX:
+            return
+        keep = np.flatnonzero(rec.strategy >= 0)
+        keep = keep[:: max(1, -(-keep.size // self.ESCAPES_PER_WAVE))]
+        if keep.size == 0:
+            return
+        x, n, w = rec.x[keep], rec.n[keep], rec.wi[keep]
+        side = np.where(np.einsum("ij,ij->i", w, n) >= 0.0, 1.0, -1.0)
+        eps = 1e-5 * float(np.linalg.norm(ctx.scene.bounds[1] - ctx.scene.bounds[0]))
+        prim = ctx.accel.intersect(x + (side * eps)[:, None] * n, w)[1]
+        out = prim < 0
+        if out.any():
+            self._escapes.append((x[out].copy(), w[out].copy()))
+            self.info["escapes"] += int(out.sum())
+
+    def _aim(self):
+        """The EnvAim of the escapes seen so far, or None (no aiming, or no escape seen)."""
+        if not self._escapes:
+            return None
+        sc = self.ctx.scene
+        x = np.concatenate([e[0] for e in self._escapes])
+        w = np.concatenate([e[1] for e in self._escapes])
+        centre = 0.5 * (sc.bounds[0] + sc.bounds[1])
+        radius = 0.5 * float(np.linalg.norm(sc.bounds[1] - sc.bounds[0])) * 1.01
+        return env_aim(x, w / np.linalg.norm(w, axis=1, keepdims=True), centre, radius)
 
     def _n_photons(self, iteration):
         return int(round(self.photons_per_pixel * self.ctx.n_pixels * self.spp_init * 2 ** iteration))
@@ -434,12 +479,15 @@ class PhotonGuide(HistogramGuide):
     def _trace(self, iteration, sink, guided=False):
         g = self.grid
         imp = g.state(importance=True) if guided and self.light_guiding > 0.0 else None
-        n, dep, rays = trace_photons(self.ctx, g.lookup_state(), g.data_slot[: g.n_nodes], self._n_photons(iteration),
-                                     iteration, sink, first_hit=self.learn_direct, imp=imp,
-                                     p_imp=self.light_guiding)
+        n, dep, rays, ne, nt, ni = trace_photons(
+            self.ctx, g.lookup_state(), g.data_slot[: g.n_nodes], self._n_photons(iteration), iteration, sink,
+            first_hit=self.learn_direct, imp=imp, p_imp=self.light_guiding, aim=self._aim())
         self.info["photons"] += n
         self.info["deposits"] += dep
         self.info["photon_rays"] += rays
+        self.info["env_photons"] += ne
+        self.info["env_photons_traced"] += nt
+        self.info["env_photons_inside"] += ni
 
     def _initial_data(self, pilot):
         g = self.grid

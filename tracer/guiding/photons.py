@@ -8,11 +8,24 @@ perpendicular to it and outside the scene, carrying Le * pi R^2 / pdf(direction)
 the BSDF in importance mode (the adjoint), with Russian roulette on the throughput from the
 `rr_depth`-th hit on.
 
+Aimed environment photons (`EnvAim`): where camera paths were seen to escape to the environment,
+environment photons start only in the directions and through the openings those paths took. The
+directions are binned (AIM_THETA x AIM_PHI cylindrical bins); a photon whose direction falls in a
+bin (or a neighbour of one) where no camera path escaped is dropped before it is traced, and the
+others start on a rectangle of the plane 1.01 R from the centre facing the bin's centre direction
+n_b, the box of the escaped rays' crossings of that plane (over the bin and its neighbours, widened
+by the distance a direction inside the bin can drift on its way in), carrying
+Le * area * |ws . n_b| / pdf(direction). That is the flux through the rectangle, so photons that
+enter keep their expected power; photons that would have entered elsewhere are lost to the maps
+(never to the render, whose BSDF share of the mixture keeps every direction).
+
 At every hit on a non-delta surface whose voxel has a data slot, the photon deposits its power
 (luminance) in the bin of the direction it arrived from. Photons are traced as a wavefront, like
 camera paths; `trace_photons` hands each bounce's deposits to a sink.
 """
+import functools
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import prange
@@ -32,18 +45,103 @@ from ..sampling import (
     to_world,
     triangle_point,
 )
-from .directional import direction_bin, map_pdf, map_sample
+from .directional import bin_of_batch, direction_bin, map_pdf, map_sample
 from .spatial import find_voxel
 
 
+AIM_THETA = 32
+AIM_PHI = 64
+
+
+class EnvAim(NamedTuple):
+    """Where environment photons may start (see the module docstring); `allowed` empty: anywhere."""
+
+    allowed: np.ndarray  # (K,) bool per direction bin (AIM_THETA x AIM_PHI)
+    box: np.ndarray  # (K, 4) float64: s0, s1, t0, t1 of the start rectangle in the bin's frame
+    axes: np.ndarray  # (K, 3, 3) float64: the bin's centre direction n_b and its frame s, t
+
+
+def no_aim():
+    return EnvAim(np.zeros(0, np.bool_), np.zeros((0, 4)), np.zeros((0, 3, 3)))
+
+
+@functools.lru_cache(maxsize=1)
+def _bin_axes():
+    """(K, 3, 3): the centre direction of every aim bin and its frame (sampling.frame)."""
+    k = np.arange(AIM_THETA * AIM_PHI)
+    z = -1.0 + (k // AIM_PHI + 0.5) * (2.0 / AIM_THETA)
+    phi = -math.pi + (k % AIM_PHI + 0.5) * (2.0 * math.pi / AIM_PHI)
+    r = np.sqrt(1.0 - z * z)
+    nb = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    axes = np.empty((k.size, 3, 3))
+    for j in range(k.size):
+        s, t = frame((nb[j, 0], nb[j, 1], nb[j, 2]))
+        axes[j] = (nb[j], s, t)
+    return axes
+
+
+def env_aim(x, w, centre, radius):
+    """EnvAim from escaped camera rays: origins x (m, 3) and unit directions w (m, 3)."""
+    if len(x) == 0:
+        return no_aim()
+    axes = _bin_axes().copy()
+    K = axes.shape[0]
+    b = bin_of_batch(np.ascontiguousarray(w), AIM_THETA, AIM_PHI)
+    seen = np.zeros((AIM_THETA, AIM_PHI), np.bool_)
+    seen.reshape(-1)[b] = True
+    # a bin is allowed if it or a neighbour (phi wraps around) saw an escape
+    pad = np.pad(seen, ((1, 1), (0, 0)))
+    allowed = np.zeros_like(seen)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            allowed |= np.roll(pad[1 + dr: 1 + dr + AIM_THETA], dc, axis=1)
+    allowed = allowed.reshape(-1)
+    box = np.zeros((K, 4))
+    box[:, 0] = box[:, 2] = np.inf
+    box[:, 1] = box[:, 3] = -np.inf
+    # crossings of each escaped ray with the start planes of its bin and the neighbours
+    row, col = b // AIM_PHI, b % AIM_PHI
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            r2 = row + dr
+            ok = (r2 >= 0) & (r2 < AIM_THETA)
+            nbin = r2[ok] * AIM_PHI + (col[ok] + dc) % AIM_PHI
+            nb, sb, tb = axes[nbin, 0], axes[nbin, 1], axes[nbin, 2]
+            rel = x[ok] - centre
+            cosw = np.einsum("ij,ij->i", w[ok], nb)
+            good = cosw > 0.05
+            tau = (1.01 * radius - np.einsum("ij,ij->i", rel, nb)) / np.where(good, cosw, 1.0)
+            q = rel + tau[:, None] * w[ok]
+            qs, qt = np.einsum("ij,ij->i", q, sb), np.einsum("ij,ij->i", q, tb)
+            nbin, qs, qt = nbin[good], qs[good], qt[good]
+            np.minimum.at(box[:, 0], nbin, qs)
+            np.maximum.at(box[:, 1], nbin, qs)
+            np.minimum.at(box[:, 2], nbin, qt)
+            np.maximum.at(box[:, 3], nbin, qt)
+    # a direction inside a bin is within `half` of its centre; over the ~2.02 R it travels to the
+    # far side of the scene, it drifts sideways by up to 2.02 R tan(half)
+    half = max(math.pi / AIM_PHI, 2.0 / AIM_THETA)
+    margin = 2.02 * radius * math.tan(half)
+    box[:, 0] -= margin
+    box[:, 2] -= margin
+    box[:, 1] += margin
+    box[:, 3] += margin
+    allowed &= np.isfinite(box).all(axis=1)
+    box[~allowed] = 0.0
+    return EnvAim(allowed, box, axes)
+
+
 @kernel
-def emit(lt, tri, centre, radius, tri_eps, seed, iteration, g0, key, o, d, power, thr, depth):
-    """Photons g0 .. g0+n-1 of an iteration: origin, direction, power (RGB), throughput 1."""
+def emit(lt, tri, centre, radius, tri_eps, seed, iteration, g0, aim, key, o, d, power, thr, depth, src):
+    """Photons g0 .. g0+n-1 of an iteration: origin, direction, power (RGB), throughput 1; src 1
+    for an environment photon, 0 for one from a triangle (power 0: dropped)."""
     n = key.shape[0]
+    aimed = aim.allowed.shape[0] > 0
     for i in prange(n):
         k = photon_key(seed, iteration, g0 + i)
         key[i] = k
         depth[i] = 0
+        src[i] = 0
         for c in range(3):
             thr[i, c] = 1.0
             power[i, c] = 0.0
@@ -52,10 +150,28 @@ def emit(lt, tri, centre, radius, tri_eps, seed, iteration, g0, key, o, d, power
         d[i, 2] = 1.0
         u_sel = uniform(k, P_LIGHT)
         if u_sel < lt.p_env:
+            src[i] = 1
             # From the environment: a direction by the environment's sampling, a disk of radius R
             ws, _, rad, pdf, _ = sample_light(lt, tri, (centre[0], centre[1], centre[2]), u_sel,
                                            uniform(k, P_POS), uniform(k, P_POS + 1))
             if not (pdf > 0.0):
+                continue
+            if aimed:
+                # ... or the start rectangle of its bin, where camera paths escaped
+                bn = direction_bin(ws, AIM_THETA, AIM_PHI)
+                if not aim.allowed[bn]:
+                    continue
+                nb = (aim.axes[bn, 0, 0], aim.axes[bn, 0, 1], aim.axes[bn, 0, 2])
+                cw = dot(ws, nb)
+                if not (cw > 0.0):
+                    continue
+                bs = aim.box[bn, 0] + uniform(k, P_DIR) * (aim.box[bn, 1] - aim.box[bn, 0])
+                bt = aim.box[bn, 2] + uniform(k, P_DIR + 1) * (aim.box[bn, 3] - aim.box[bn, 2])
+                area = (aim.box[bn, 1] - aim.box[bn, 0]) * (aim.box[bn, 3] - aim.box[bn, 2])
+                for c in range(3):
+                    o[i, c] = centre[c] + 1.01 * radius * nb[c] + bs * aim.axes[bn, 1, c] + bt * aim.axes[bn, 2, c]
+                    d[i, c] = -ws[c]
+                    power[i, c] = rad[c] * area * cw / pdf
                 continue
             s, t = frame(ws)
             dx, dy = sample_concentric_disk(uniform(k, P_DIR), uniform(k, P_DIR + 1))
@@ -200,6 +316,7 @@ class PhotonBuffers:
         self.key = np.zeros(size, np.uint64)
         self.o, self.d, self.power, self.thr = z3(), z3(), z3(), z3()
         self.depth = np.zeros(size, np.int32)
+        self.src = np.zeros(size, np.int8)
         self.alive = np.zeros(size, np.bool_)
         self.next_o, self.next_d = z3(), z3()
         self.active = np.zeros(size, np.int64)  # the photons still travelling, and their rays
@@ -212,13 +329,15 @@ class PhotonBuffers:
 
 
 def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 << 16, max_hits=None,
-                  first_hit=True, imp=None, p_imp=0.0):
+                  first_hit=True, imp=None, p_imp=0.0, aim=None):
     """Trace `n_photons` photons of guide iteration `iteration`; after every bounce call
     sink(node, bin, value, x, n) with that bounce's deposits (arrays of equal length, views into
     buffers that the next bounce overwrites; n is the normal on the side the photon arrived on); with
     first_hit False, photons deposit from their second hit on (indirect light only). With an
     importance state `imp` (HierarchicalGrid.state(importance=True)) and p_imp > 0, light tracing
-    is guided (see scatter). Returns (photons traced, deposits, rays)."""
+    is guided (see scatter). `aim`: an EnvAim for the environment photons (None: from the whole
+    disk). Returns (photons, deposits, rays, environment photons emitted, of them traced (not
+    dropped), of them that deposited at least once)."""
     scene, accel, lt = ctx.scene, ctx.accel, ctx.lights
     if max_hits is None:
         max_hits = ctx.max_depth - 1 if ctx.max_depth > 0 else 64
@@ -229,14 +348,20 @@ def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 <<
     if imp is None or not p_imp > 0.0:
         imp = gs._replace(slot=np.full(gs.slot.shape[0], -1, np.int32))
         p_imp = 0.0
+    aim = no_aim() if aim is None else aim
     deposits = 0
     rays = 0
+    env = [0, 0, 0]
     for g0 in range(0, n_photons, buf.size):
         n = min(buf.size, n_photons - g0)
-        emit(lt, scene.tri, centre, radius, ctx.tri_eps, ctx.seed, iteration, g0, buf.key[:n], buf.o[:n], buf.d[:n],
-             buf.power[:n], buf.thr[:n], buf.depth[:n])
+        emit(lt, scene.tri, centre, radius, ctx.tri_eps, ctx.seed, iteration, g0, aim, buf.key[:n], buf.o[:n],
+             buf.d[:n], buf.power[:n], buf.thr[:n], buf.depth[:n], buf.src[:n])
         live = np.flatnonzero(np.any(buf.power[:n] > 0.0, axis=1))
         m = live.size
+        is_env = buf.src[:n] == 1
+        env[0] += int(is_env.sum())
+        env[1] += int(is_env[live].sum())
+        entered = np.zeros(n, np.bool_)
         active = buf.active
         active[:m] = live
         buf.ray_o[:m], buf.ray_d[:m] = buf.o[live], buf.d[live]
@@ -249,9 +374,11 @@ def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 <<
                     buf.depth, max_hits, ctx.rr_depth, ctx.tri_eps, buf.alive[:m], buf.next_o[:m], buf.next_d[:m],
                     buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m], buf.dep_n[:m], first_hit,
                     imp, float(p_imp))
+            entered[active[:m][buf.dep_node[:m] >= 0]] = True
             m, nd = compact_wave(m, buf.alive, buf.next_o, buf.next_d, active, buf.ray_o, buf.ray_d,
                                  buf.dep_node, buf.dep_bin, buf.dep_val, buf.dep_x, buf.dep_n)
             if nd:
                 deposits += nd
                 sink(buf.dep_node[:nd], buf.dep_bin[:nd], buf.dep_val[:nd], buf.dep_x[:nd], buf.dep_n[:nd])
-    return n_photons, deposits, rays
+        env[2] += int((entered & is_env).sum())
+    return n_photons, deposits, rays, env[0], env[1], env[2]
