@@ -205,7 +205,7 @@ def main(argv=None):
                   f"{row['msamples_per_s_median']:.3f}), {row['mrays_per_s']:.2f} Mrays/s, "
                   f"{row['rays_per_sample']} rays/sample, {row['seconds']:.2f} s")
             print(f"    {parts}")
-    stage_table([r for r in rows if "stages" in r])
+    stage_table([r for r in rows if "accel" in r])
     if a.json:
         os.makedirs(os.path.dirname(os.path.abspath(a.json)), exist_ok=True)
         atomic.write_json(a.json, rows, indent=1)  # a temporary file renamed into place
