@@ -9,9 +9,11 @@ thread count.
 """
 import math
 
+import numba
 import numpy as np
+from numba import prange
 
-from ._jit import jit
+from ._jit import kernel
 
 AOV_NAMES = ("albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z")
 N_AOV = len(AOV_NAMES)
@@ -117,36 +119,45 @@ def combine_films(films, kinds=None):
     return image, variance, [float(next(it)) if x > 0.0 else 0.0 for x in weights]
 
 
-@jit
+def _check_pixels(pixel, n):
+    if pixel.shape[0] and (pixel.min() < 0 or pixel.max() >= n):
+        raise IndexError("a sample's pixel is outside the film")
+
+
 def _accumulate(count, s, sq, aov, pixel, radiance, aovs):
-    # Sequential on purpose: the order of additions into each pixel is the sample order.
-    for i in range(pixel.shape[0]):
-        p = pixel[i]
-        if p < 0 or p >= count.shape[0]:
-            raise IndexError("a sample's pixel is outside the film")
-        count[p] += 1.0
-        for c in range(3):
-            r = radiance[i, c]
-            s[p, c] += r
-            sq[p, c] += r * r
-        for c in range(aov.shape[1]):
-            aov[p, c] += aovs[i, c]
+    _check_pixels(pixel, count.shape[0])
+    _accumulate_parts(count, s, sq, aov, pixel, radiance, aovs, np.empty(0), 1.0, 1.0, numba.get_num_threads())
 
 
-@jit
 def _accumulate_weighted(count, s, sq, aov, pixel, radiance, aovs, weight, aov_scale, count_add):
     """_accumulate with value weight x radiance, AOVs x aov_scale, and count_add per sample."""
-    for i in range(pixel.shape[0]):
-        p = pixel[i]
-        if p < 0 or p >= count.shape[0]:
-            raise IndexError("a sample's pixel is outside the film")
-        count[p] += count_add
-        for c in range(3):
-            r = weight[i] * radiance[i, c]
-            s[p, c] += r
-            sq[p, c] += r * r
-        for c in range(aov.shape[1]):
-            aov[p, c] += aov_scale * aovs[i, c]
+    _check_pixels(pixel, count.shape[0])
+    _accumulate_parts(count, s, sq, aov, pixel, radiance, aovs, weight, aov_scale, count_add,
+                      numba.get_num_threads())
+
+
+@kernel
+def _accumulate_parts(count, s, sq, aov, pixel, radiance, aovs, weight, aov_scale, count_add, parts):
+    """Add samples (value weight x radiance, 1 x radiance where weight is empty) into their pixels.
+    The pixels are split into `parts` ranges, one per thread; each thread scans every sample and
+    adds those of its range, so each pixel receives its samples in sample order (the sums are
+    those of a sequential loop, bit for bit, whatever the thread count)."""
+    npix = count.shape[0]
+    weighted = weight.shape[0] == pixel.shape[0]
+    for part in prange(parts):
+        lo = part * npix // parts
+        hi = (part + 1) * npix // parts
+        for i in range(pixel.shape[0]):
+            p = pixel[i]
+            if p < lo or p >= hi:
+                continue
+            count[p] += count_add
+            for c in range(3):
+                r = weight[i] * radiance[i, c] if weighted else radiance[i, c]
+                s[p, c] += r
+                sq[p, c] += r * r
+            for c in range(aov.shape[1]):
+                aov[p, c] += aov_scale * aovs[i, c]
 
 
 class SampleSink:
