@@ -26,6 +26,7 @@ from numba import prange, types
 from numba.extending import intrinsic
 
 from ._jit import jit, kernel
+from .bvh import _bounds, edge_cross
 
 SKIP, VERT, FACE, USEMTL, MTLLIB, OTHER = 0, 1, 2, 3, 4, 5
 _STRTOD = ctypes.cast(ctypes.CDLL(None).strtod, ctypes.c_void_p).value
@@ -373,30 +374,15 @@ def read_obj(data):
 
 
 @kernel
-def _areas(tri, area2, box):
-    n = tri.shape[0]
-    nch = box.shape[0]
-    for c in prange(nch):
-        for a in range(3):
-            box[c, 0, a] = np.inf
-            box[c, 1, a] = -np.inf
-        for i in range(c * n // nch, (c + 1) * n // nch):
-            ux, uy, uz = tri[i, 1, 0] - tri[i, 0, 0], tri[i, 1, 1] - tri[i, 0, 1], tri[i, 1, 2] - tri[i, 0, 2]
-            vx, vy, vz = tri[i, 2, 0] - tri[i, 0, 0], tri[i, 2, 1] - tri[i, 0, 1], tri[i, 2, 2] - tri[i, 0, 2]
-            x = uy * vz - uz * vy
-            y = uz * vx - ux * vz
-            z = ux * vy - uy * vx
-            area2[i] = np.sqrt(x * x + y * y + z * z)
-            for k in range(3):
-                for a in range(3):
-                    box[c, 0, a] = min(box[c, 0, a], tri[i, k, a])
-                    box[c, 1, a] = max(box[c, 1, a], tri[i, k, a])
+def _areas(tri, area2):
+    for i in prange(tri.shape[0]):
+        n = edge_cross(tri, i)[2]
+        area2[i] = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
 
 
 def triangle_areas(tri):
     """(|e1 x e2| per triangle (F,), bounds (2, 3): min and max corner) of triangles (F, 3, 3)
-    with finite vertices, in one parallel pass without temporaries."""
+    with finite vertices, in parallel passes without temporaries."""
     area2 = np.empty(tri.shape[0])
-    box = np.empty((64, 2, 3))
-    _areas(tri, area2, box)
-    return area2, np.stack([box[:, 0].min(axis=0), box[:, 1].max(axis=0)])
+    _areas(tri, area2)
+    return area2, _bounds(tri)[0]

@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numba import prange
 
-from tracer._jit import kernel
+from tracer._jit import jit, kernel
 from tracer.errors import SettingsError, unknown_name
 
 ACCELS = ("embree", "numba")
@@ -58,6 +58,15 @@ def _check_tri(tri):
     if tri.ndim != 3 or tri.shape[1:] != (3, 3):
         raise ValueError(f"triangles must have shape (F, 3, 3), got {tri.shape}")
     return tri
+
+
+@jit
+def edge_cross(tri, i):
+    """Triangle i's edges e1 = v1 - v0, e2 = v2 - v0 and n = e1 x e2 (as numpy's cross computes it)."""
+    e1 = (tri[i, 1, 0] - tri[i, 0, 0], tri[i, 1, 1] - tri[i, 0, 1], tri[i, 1, 2] - tri[i, 0, 2])
+    e2 = (tri[i, 2, 0] - tri[i, 0, 0], tri[i, 2, 1] - tri[i, 0, 1], tri[i, 2, 2] - tri[i, 0, 2])
+    n = (e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0])
+    return e1, e2, n
 
 
 @kernel

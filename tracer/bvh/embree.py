@@ -31,7 +31,7 @@ from numba import prange, types
 from numba.extending import intrinsic
 
 from tracer._jit import jit, kernel
-from tracer.bvh import _bounds, _check_rays, _check_tri
+from tracer.bvh import _bounds, _check_rays, _check_tri, edge_cross
 from tracer.bvh.numba_bvh import _NumbaThreads
 
 # Embree 4 C API constants (rtcore_common.h, rtcore_geometry.h, rtcore_buffer.h)
@@ -138,11 +138,10 @@ def _plane_tables(tri):
     b1 = (x - v0) . a1, b2 = (x - v0) . a2. Degenerate triangles get n = a1 = a2 = 0."""
     out = np.empty((tri.shape[0], 12))
     for i in prange(tri.shape[0]):
-        e1x, e1y, e1z = tri[i, 1, 0] - tri[i, 0, 0], tri[i, 1, 1] - tri[i, 0, 1], tri[i, 1, 2] - tri[i, 0, 2]
-        e2x, e2y, e2z = tri[i, 2, 0] - tri[i, 0, 0], tri[i, 2, 1] - tri[i, 0, 1], tri[i, 2, 2] - tri[i, 0, 2]
-        nx = e1y * e2z - e1z * e2y
-        ny = e1z * e2x - e1x * e2z
-        nz = e1x * e2y - e1y * e2x
+        e1, e2, n = edge_cross(tri, i)
+        e1x, e1y, e1z = e1
+        e2x, e2y, e2z = e2
+        nx, ny, nz = n
         nn = (nx * nx + nz * nz) + ny * ny  # the order numpy's einsum("ij,ij->i") sums in
         if nn > 0.0 and math.isfinite(nn):
             inv = 1.0 / nn
