@@ -455,7 +455,10 @@ def test_sigint_writes_the_partial_image_and_exits_130(tmp_path):
     out = tmp_path / "i.exr"
     p = subprocess.Popen([sys.executable, "-m", "tracer", CORNELL, "--spp", "1000000", "--width", "32",
                           "--height", "32", "--wave-size", "4096", "-o", str(out)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT,
+                         # a pytest started in the background (nohup ... &) ignores SIGINT, and its
+                         # children would inherit that: give the CLI the default handling back
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     err = b""
     try:
         deadline = time.monotonic() + 300  # the first run after an edit compiles for ~30 s

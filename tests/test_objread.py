@@ -56,6 +56,7 @@ def _face(ids, pattern):
     return "f " + " ".join(_token(i, pattern) for i in ids)
 
 
+@pytest.mark.filterwarnings("ignore:All-NaN slice:RuntimeWarning", "ignore:invalid value:RuntimeWarning")
 @pytest.mark.parametrize("pattern", [1, 2, 3, 4])
 @pytest.mark.parametrize("style", [0, 1, 2, 3])
 def test_statements_match_trimesh(tmp_path, pattern, style):
