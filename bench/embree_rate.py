@@ -1,0 +1,89 @@
+"""Embree's own rate on the rays of a render, from C: the floor our ray queries are measured against.
+
+    python -m bench.embree_rate                       # mitsuba-cornell, open-1k, open-1m
+    python -m bench.embree_rate --scenes open-1k --spp 1
+
+Renders each scene once at `--spp` (after an untimed render), capturing every batch the accel is
+asked (closest hits and shadow rays) and the scene's triangles (float32, less the accel's centre),
+into bench/results/embree_rate/. Then it builds bench/embree_rate.c with gcc (-O2 -march=native
+-fopenmp) against the libembree4 that embreex installs, and runs it: ns per ray with one ray, 8 and
+16 per call on one thread, and with 16 per call on 2 threads.
+"""
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+
+import tracer
+from tracer.bvh import embree
+
+from . import throughput
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+OUT = os.path.join(ROOT, "bench", "results", "embree_rate")
+
+
+def capture(name, spp, folder):
+    """Write NAME.hdr (vertex, bounce-ray, shadow-ray counts), .v, .ray (origin, direction) and
+    .shadow (origin, direction, tmax), float32, coordinates less the accel's centre."""
+    scene = tracer.load_scene(throughput.scene_spec(name)["obj"])
+    calls = {"i": [], "o": []}
+    inter, occ = embree.EmbreeAccel.intersect, embree.EmbreeAccel.occluded
+
+    def record_i(self, o, d, tmax=None):
+        calls["i"].append((np.array(o), np.array(d)))
+        return inter(self, o, d, tmax)
+
+    def record_o(self, o, d, tmax):
+        calls["o"].append((np.array(o), np.array(d), np.array(tmax)))
+        return occ(self, o, d, tmax)
+
+    tracer.render(scene, spp=1, max_depth=8, rr_depth=5)
+    embree.EmbreeAccel.intersect, embree.EmbreeAccel.occluded = record_i, record_o
+    try:
+        tracer.render(scene, spp=spp, max_depth=8, rr_depth=5)
+    finally:
+        embree.EmbreeAccel.intersect, embree.EmbreeAccel.occluded = inter, occ
+    c = 0.5 * (scene.bounds[0] + scene.bounds[1])  # the accel's centre
+    ray = np.concatenate([np.hstack([o - c, d]) for o, d in calls["i"][1:]])  # [0]: the warm-up path
+    sh = np.concatenate([np.hstack([o - c, d, t[:, None]]) for o, d, t in calls["o"]])
+    v = (scene.tri - c).astype(np.float32).reshape(-1, 3)
+    base = os.path.join(folder, name)
+    np.array([len(v), len(ray), len(sh), 0], np.int64).tofile(base + ".hdr")
+    v.tofile(base + ".v")
+    ray.astype(np.float32).tofile(base + ".ray")
+    sh.astype(np.float32).tofile(base + ".shadow")
+    return len(ray), len(sh)
+
+
+def build(folder):
+    lib = embree._LIB._name
+    exe = os.path.join(folder, "embree_rate")
+    subprocess.run(["gcc", "-O2", "-march=native", "-fopenmp", "-o", exe, os.path.join(ROOT, "bench", "embree_rate.c"),
+                    lib, f"-Wl,-rpath,{os.path.dirname(lib)}", "-lm"], check=True)
+    return exe
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="python -m bench.embree_rate", description=__doc__.splitlines()[0])
+    p.add_argument("--scenes", default="mitsuba-cornell,open-1k,open-1m")
+    p.add_argument("--spp", type=int, default=1)
+    p.add_argument("--quality", type=int, default=1, help="RTC build quality (0 low, 1 medium, 2 high)")
+    a = p.parse_args(argv)
+    if shutil.which("gcc") is None:
+        print("bench.embree_rate needs gcc (with OpenMP) to build bench/embree_rate.c", file=sys.stderr)
+        return 2
+    os.makedirs(OUT, exist_ok=True)
+    exe = build(OUT)
+    for name in a.scenes.split(","):
+        n, ns = capture(name, a.spp, OUT)
+        print(f"# {name}: {n} closest-hit rays, {ns} shadow rays at {a.spp} spp", flush=True)
+        subprocess.run([exe, OUT, name, str(a.quality)], check=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
