@@ -101,6 +101,25 @@ def classify(buf, starts, ends, kinds):
 
 
 @jit
+def _digits(buf, i, e, m, digits):
+    """The run of decimal digits at buf[i] (line end e), appended to m while it holds at most 18
+    significant digits (so that m stays below 2^63): (index after the run, m, significant digits
+    in m, digits appended, digits dropped)."""
+    kept = 0
+    dropped = 0
+    while i < e and 48 <= buf[i] <= 57:
+        if digits < 18:
+            if m > 0 or buf[i] != 48:
+                digits += 1
+            m = m * 10 + (buf[i] - 48)
+            kept += 1
+        else:
+            dropped += 1
+        i += 1
+    return i, m, digits, kept, dropped
+
+
+@jit
 def _number(buf, j, e, addr, strtod):
     """Parse the decimal at buf[j] (line end e; the buffer's address addr, strtod's address
     strtod): (value, index after it, ok)."""
@@ -109,34 +128,14 @@ def _number(buf, j, e, addr, strtod):
     if i < e and (buf[i] == 45 or buf[i] == 43):
         neg = buf[i] == 45
         i += 1
-    m = 0
-    digits = 0  # significant digits kept in m (at most 18: m stays below 2^63)
-    drop = 0  # integer digits beyond the 19 kept (each a factor of 10)
+    i, m, digits, kept, drop = _digits(buf, i, e, 0, 0)  # the integer part
     frac = 0  # digits after the point kept in m
-    seen = False
-    hard = False
-    while i < e and 48 <= buf[i] <= 57:
-        seen = True
-        if digits < 18:
-            if m > 0 or buf[i] != 48:
-                digits += 1
-            m = m * 10 + (buf[i] - 48)
-        else:
-            drop += 1
-            hard = True
-        i += 1
+    hard = drop > 0
+    seen = kept + drop > 0
     if i < e and buf[i] == 46:  # '.'
-        i += 1
-        while i < e and 48 <= buf[i] <= 57:
-            seen = True
-            if digits < 18:
-                if m > 0 or buf[i] != 48:
-                    digits += 1
-                m = m * 10 + (buf[i] - 48)
-                frac += 1
-            else:
-                hard = True
-            i += 1
+        i, m, digits, frac, fdrop = _digits(buf, i + 1, e, m, digits)
+        hard = hard or fdrop > 0
+        seen = seen or frac + fdrop > 0
     if not seen:
         return 0.0, i, False
     ex = 0
@@ -334,7 +333,7 @@ def read_obj(data):
     face_indices(buf, starts, ends, flines, offsets, idx)
 
     # usemtl and mtllib lines are few: read them in Python
-    names, mtllibs, first_use = [], [], {}
+    names, mtllibs = [], []
     mlines = np.flatnonzero(kinds == USEMTL)
     mtl_lines = np.flatnonzero(kinds == MTLLIB)
     for ln in mlines:
@@ -342,22 +341,22 @@ def read_obj(data):
         if not name or name != " ".join(name.split()):
             return None  # trimesh and tracer.scene would name it differently
         names.append(name)
-        first_use.setdefault(name, None)
     for ln in mtl_lines:
         mtllibs.extend(data[starts[ln] + 6 : ends[ln]].decode("utf-8").split())
     del data, buf, starts, ends, kinds  # the text's memory, before the triangles take theirs
+    used = list(dict.fromkeys(names))  # the usemtl names in order of first use
     # material of each face line: that of the last usemtl line before it (-1: none)
-    uniq = {n: k for k, n in enumerate(first_use)}
+    uniq = {n: k for k, n in enumerate(used)}
     mat_of_line = np.array([uniq[n] for n in names] + [-1], np.int64)
     face_mat = mat_of_line[np.searchsorted(mlines, flines) - 1]  # -1 picks the trailing -1
-    # groups in reverse order of their first face, as trimesh builds them
-    order = []
-    if face_mat.size:
-        seen, first = np.unique(face_mat, return_index=True)
-        order = list(seen[np.argsort(first)][::-1])
+    # the face lines of each material in file order (one stable sort), the groups in reverse
+    # order of their first face, as trimesh builds them
+    by_mat = np.argsort(face_mat, kind="stable")
+    mats, start = np.unique(face_mat[by_mat], return_index=True)
+    bounds = np.append(start, by_mat.size)
     tris, groups = [], []
-    for g in order:
-        sel = np.flatnonzero(face_mat == g)
+    for j in np.argsort(by_mat[start])[::-1]:
+        sel = by_mat[bounds[j]: bounds[j + 1]]
         c = counts[sel]
         o = np.zeros(sel.size + 1, np.int64)
         np.cumsum(c, out=o[1:])
@@ -366,11 +365,11 @@ def read_obj(data):
         if t is None:
             return None
         tris.append(t)
-        groups.append((list(first_use)[g] if g >= 0 else None, len(t)))
+        groups.append((used[mats[j]] if mats[j] >= 0 else None, len(t)))
     if not tris:
         return None  # no faces: the slow path reports it
     t = np.concatenate(tris) if len(tris) > 1 else tris[0]
-    return verts[t], groups, mtllibs, list(first_use)
+    return verts[t], groups, mtllibs, used
 
 
 @kernel

@@ -187,12 +187,10 @@ def _read_bytes(path, what):
         raise SceneError(f"{path}: cannot read {what} ({e.strerror})") from None
 
 
-def read_text(path, what, data=None):
-    """The text of an OBJ or MTL file (or of its bytes `data`, already read): UTF-8 (with or
-    without a BOM), else the encoding charset_normalizer finds most likely (a Latin-1 comment is
-    common in exported files)."""
-    if data is None:
-        data = _read_bytes(path, what)
+def read_text(path, what):
+    """The text of an OBJ or MTL file: UTF-8 (with or without a BOM), else the encoding
+    charset_normalizer finds most likely (a Latin-1 comment is common in exported files)."""
+    data = _read_bytes(path, what)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -213,14 +211,13 @@ class ObjScan:
     usemtl: list
 
 
-def scan_obj(path, data=None):
+def scan_obj(path):
     """Validate an OBJ line by line before trimesh reads it, so that errors name the line.
 
     Checks that `v` lines hold three finite numbers and `f` lines hold vertex indices that
-    exist. Returns an ObjScan (text, `mtllib` file names, `usemtl` names). `data`: the file's
-    bytes, if already read.
+    exist. Returns an ObjScan (text, `mtllib` file names, `usemtl` names).
     """
-    text = read_text(path, "OBJ", data)
+    text = read_text(path, "OBJ")
     mtllibs, usemtl = [], {}
     nv = 0
     for lineno, line in enumerate(text.splitlines(), 1):

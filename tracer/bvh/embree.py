@@ -2,10 +2,11 @@
 
 The embreex wheel ships Intel's libembree4. Its Python API traces a batch one ray at a time in
 a Cython loop behind float32 copies of the rays; here the scene is built through the library's
-C API (ctypes, once per scene) and `rtcIntersect1` / `rtcOccluded1` are called directly from
-`prange` kernels, the library's entry points passed in as addresses, so the kernels stay
-cacheable. On the Cornell box this halves the time per ray against embreex's own loop (106 vs
-175 ns on one core) and lets Numba's threads, not a Python thread pool, split the batch.
+C API (ctypes, once per scene) and `rtcIntersect16` / `rtcOccluded16` are called directly from
+`prange` kernels, 16 rays a call, the library's entry points passed in as addresses, so the
+kernels stay cacheable. Numba's threads, not a Python thread pool, split the batch. On the
+Cornell box's stage batches the packets take 56-58 ns per ray against 59-66 with one ray per
+call (2 threads); Embree's own rate from C is in bench/summary/throughput.md.
 
 Embree works in float32. To keep precision far from the origin, vertices and ray origins are
 shifted by the scene's bounding-box centre before the cast (as trimesh's ray_pyembree does).
@@ -105,14 +106,13 @@ def _call4(typingctx, fn, a, b, c, d):
 
 @jit
 def _load_lane(buf, ib, k, org, dirs, i, centre, tfar):
-    """Fill lane k of the packet in scratch row `buf` (ib: the same row as int32) with ray i;
-    False (and the lane left invalid) if the ray is invalid."""
+    """Fill lane k of the packet in scratch row `buf` (ib: the same row as int32) with ray i and
+    mark it valid; False (the lane untouched) if the ray is invalid."""
     ok = True
     for a in range(3):
         if not (math.isfinite(org[i, a]) and math.isfinite(dirs[i, a])):
             ok = False
     if not ok or (dirs[i, 0] == 0.0 and dirs[i, 1] == 0.0 and dirs[i, 2] == 0.0) or not (tfar >= 0.0):
-        ib[_VALID * _LANES + k] = 0
         return False
     L = _LANES
     buf[k] = org[i, 0] - centre[0]
@@ -181,6 +181,24 @@ def _refine(plane, p, o, d, t, b1, b2, i):
     b2[i] = u2
 
 
+@jit
+def _fill_packet(buf, ib, org, dirs, tmax, has_tmax, base, m, centre):
+    """Load rays base .. base+m-1 into the packet in scratch row `buf` (lanes past m, and invalid
+    rays, left invalid; no hit recorded in any lane); True if any lane is valid."""
+    L = _LANES
+    any_valid = False
+    for k in range(L):
+        ib[_VALID * L + k] = 0
+        ib[17 * L + k] = -1  # primID, geomID (RTC_INVALID_GEOMETRY_ID until a hit), instID
+        ib[18 * L + k] = -1
+        ib[19 * L + k] = -1
+    for k in range(m):
+        i = base + k
+        if _load_lane(buf, ib, k, org, dirs, i, centre, tmax[i] if has_tmax else np.inf):
+            any_valid = True
+    return any_valid
+
+
 @kernel
 def _intersect(fn, scene, plane, centre, org, dirs, tmax, refine, scratch, t, prim, b1, b2):
     """Closest hits of a batch, 16 rays per rtcIntersect16 call, each chunk of the batch on one
@@ -196,21 +214,12 @@ def _intersect(fn, scene, plane, centre, org, dirs, tmax, refine, scratch, t, pr
         hi = (c + 1) * n // nch
         for base in range(c * n // nch, hi, L):
             m = min(L, hi - base)
-            any_valid = False
-            for k in range(L):
-                ib[_VALID * L + k] = 0
-                ib[18 * L + k] = -1  # geomID: RTC_INVALID_GEOMETRY_ID until a hit
-            for k in range(m):
-                i = base + k
+            for i in range(base, base + m):
                 t[i] = np.inf
                 prim[i] = -1
                 b1[i] = 0.0
                 b2[i] = 0.0
-                if _load_lane(buf, ib, k, org, dirs, i, centre, tmax[i] if has_tmax else np.inf):
-                    any_valid = True
-                    ib[17 * L + k] = -1
-                    ib[19 * L + k] = -1
-            if not any_valid:
+            if not _fill_packet(buf, ib, org, dirs, tmax, has_tmax, base, m, centre):
                 continue
             _call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
             for k in range(m):
@@ -243,14 +252,9 @@ def _occluded(fn, scene, centre, org, dirs, tmax, scratch, out):
         hi = (c + 1) * n // nch
         for base in range(c * n // nch, hi, L):
             m = min(L, hi - base)
-            any_valid = False
-            for k in range(L):
-                ib[_VALID * L + k] = 0
-            for k in range(m):
-                out[base + k] = False
-                if _load_lane(buf, ib, k, org, dirs, base + k, centre, tmax[base + k]):
-                    any_valid = True
-            if not any_valid:
+            for i in range(base, base + m):
+                out[i] = False
+            if not _fill_packet(buf, ib, org, dirs, tmax, True, base, m, centre):
                 continue
             _call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
             for k in range(m):
@@ -284,6 +288,7 @@ class EmbreeAccel:
         self.threads = max(1, min(int(threads), limit) if threads else numba.get_num_threads())
         self.refine = bool(refine)
         self._plane = _plane_tables(tri)
+        self._rows = _scratch()  # the packets' scratch, reused by every query (one query at a time)
         lib = _LIB
         self._device = lib.rtcNewDevice(None)
         self._scene = lib.rtcNewScene(self._device)
@@ -315,7 +320,7 @@ class EmbreeAccel:
         if n:
             with _NumbaThreads(self.threads):
                 _intersect(_INTERSECT16, self._scene, self._plane, self.centre, org, dirs,
-                           np.empty(0) if tmax is None else tmax, self.refine, _scratch(), t, prim, b1, b2)
+                           np.empty(0) if tmax is None else tmax, self.refine, self._rows, t, prim, b1, b2)
         return t, prim, b1, b2
 
     def occluded(self, org, dirs, tmax):
@@ -324,7 +329,7 @@ class EmbreeAccel:
         out = np.empty(org.shape[0], np.bool_)
         if org.shape[0]:
             with _NumbaThreads(self.threads):
-                _occluded(_OCCLUDED16, self._scene, self.centre, org, dirs, tmax, _scratch(), out)
+                _occluded(_OCCLUDED16, self._scene, self.centre, org, dirs, tmax, self._rows, out)
         return out
 
     def __repr__(self):

@@ -45,7 +45,7 @@ from ..sampling import (
     to_world,
     triangle_point,
 )
-from .directional import bin_of_batch, direction_bin, map_pdf, map_sample
+from .directional import bin_direction, bin_of_batch, direction_bin, map_pdf, map_sample
 from .spatial import find_voxel
 
 
@@ -68,15 +68,10 @@ def no_aim():
 @functools.lru_cache(maxsize=1)
 def _bin_axes():
     """(K, 3, 3): the centre direction of every aim bin and its frame (sampling.frame)."""
-    k = np.arange(AIM_THETA * AIM_PHI)
-    z = -1.0 + (k // AIM_PHI + 0.5) * (2.0 / AIM_THETA)
-    phi = -math.pi + (k % AIM_PHI + 0.5) * (2.0 * math.pi / AIM_PHI)
-    r = np.sqrt(1.0 - z * z)
-    nb = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-    axes = np.empty((k.size, 3, 3))
-    for j in range(k.size):
-        s, t = frame((nb[j, 0], nb[j, 1], nb[j, 2]))
-        axes[j] = (nb[j], s, t)
+    axes = np.empty((AIM_THETA * AIM_PHI, 3, 3))
+    for k in range(axes.shape[0]):
+        nb = bin_direction(k, AIM_THETA, AIM_PHI, 0.5, 0.5)
+        axes[k] = (nb, *frame(nb))
     return axes
 
 
