@@ -88,10 +88,16 @@ def test_reference_prints_metrics(tmp_path, capsys):
     ref = tmp_path / "ref.exr"
     assert run_cli(capsys, CORNELL, "--spp", 4, "--width", 16, "--height", 16, "-o", ref, "-q")[0] == 0
     code, text, err = run_cli(capsys, CORNELL, "--spp", 1, "--width", 16, "--height", 16,
-                              "-o", tmp_path / "x.exr", "--reference", ref)
+                              "-o", tmp_path / "x.exr", "--reference", ref, "-q")
     assert code == 0, err
-    assert "relMSE" in text and "MSE" in text and "1-SSIM" in text
+    assert "relMSE" in text and "MSE" in text and "1-SSIM" in text  # -q hides the bar, not the summary
+    assert not err
     stats = json.loads((tmp_path / "x.json").read_text())
+    # the preview takes the reference's exposure (one exposure for every method), and says so
+    from tracer.imageio import auto_exposure
+
+    assert stats["preview_exposure"] == pytest.approx(np.log2(auto_exposure(tracer.read_image(ref))), rel=1e-9)
+    assert f"exposure {stats['preview_exposure']:+.2f} EV, the reference's" in text
     m = stats["metrics"]
     assert m["relMSE"] > 0 and np.isfinite(m["1-SSIM"]) and stats["nonfinite_samples"] == 0
 
@@ -169,13 +175,18 @@ def test_malformed_obj_line(tmp_path, capsys, line, what):
     assert ":8:" in msg or ":9:" in msg or ":10:" in msg  # names the line
 
 
-def test_zero_area_triangles_are_counted_and_skipped(tmp_path):
+def test_zero_area_triangles_are_counted_and_skipped(tmp_path, capsys):
+    """Skipped zero-area triangles are in scene.warnings; the command line names them only with -v
+    (they change no pixel, and a published scene would repeat the line on every run)."""
     obj = scenes.light_quad(tmp_path, (1, 1, 1))
     with open(obj, "a") as f:
         f.write("v 0 0 1\nv 1 1 1\nv 2 2 1\nf 5 6 7\nf 5 5 6\n")
     scene = tracer.load_scene(obj)
     assert scene.n_triangles == 2
     assert any("skipped 2 zero-area" in w for w in scene.warnings)
+    for verbose in (False, True):
+        _, _, err = render_cli(capsys, tmp_path, "z", *(["-v"] if verbose else []), scene=obj, size=8, spp=1)
+        assert ("tracer: note:" in err and "skipped 2 zero-area" in err) == verbose, err
 
 
 def test_no_light(tmp_path, capsys):
@@ -330,6 +341,7 @@ def test_list_guides(capsys):
         if not line.startswith(" "):
             name = line.split(":")[0]
             blocks[name] = []
+            assert line.endswith("."), f"{name}'s description is cut: {line!r}"  # the whole first paragraph
         else:
             blocks[name].append(line.strip())
     assert list(blocks) == list(guide_names())
@@ -416,8 +428,17 @@ def test_missing_or_corrupt_reference(tmp_path, capsys):
 
 
 def test_missing_environment_map(tmp_path, capsys):
+    """The line names the sidecar, the map as the sidecar writes it, and the path looked for."""
     obj = scenes.sphere_under_sky(tmp_path, 0.5, 1.0, env={"map": "gone.exr"})
-    fails_with(capsys, [obj, "-o", tmp_path / "o.exr"], "gone.exr", "not found")
+    fails_with(capsys, [obj, "-o", tmp_path / "o.exr"], ".json", "'gone.exr' not found",
+               f"looked for {tmp_path / 'gone.exr'}")
+
+
+def test_binary_obj(tmp_path, capsys):
+    """A binary file named .obj is called so, not 'an OBJ with no faces'."""
+    obj = tmp_path / "mesh.obj"
+    obj.write_bytes(b"ply\nformat binary_little_endian 1.0\n" + bytes(range(256)) * 4)
+    fails_with(capsys, [obj, "-o", tmp_path / "o.exr"], "mesh.obj", "not a text OBJ file", "binary")
 
 
 def test_corrupt_environment_map(tmp_path, capsys):
@@ -490,6 +511,38 @@ def test_sigint_writes_the_partial_image_and_exits_130(tmp_path):
     assert int(summary.group(1)) == round(stats["spp_mean"])
     shown = re.findall(r"(\d+)/1000000 spp", err)
     assert shown and shown[-1] == summary.group(1), (shown[-3:], summary.group(1))
+
+
+def test_sigint_while_pss_learns_writes_the_candidate_image(tmp_path):
+    """Ctrl-C while pss trains its flow (the bar says `learn`): training stops at the next batch,
+    the candidate pass is the image, exit 130. (Before, training ran on to its end, 60 s here, and
+    no image was written.)"""
+    out = tmp_path / "p.exr"
+    p = subprocess.Popen([sys.executable, "-m", "tracer", CORNELL, "--guide", "pss", "--spp", "64", "--guide-opt",
+                          "train_seconds=60", "--width", "24", "--height", "24", "-o", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    err = b""
+    try:
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline and b"learn" not in err:
+            if select.select([p.stderr], [], [], 1.0)[0]:
+                chunk = os.read(p.stderr.fileno(), 4096)
+                assert chunk, f"tracer ended before learning: {err.decode(errors='replace')}"
+                err += chunk
+        assert b"candidates" in err and b"learn" in err, err.decode(errors="replace")  # the phases are shown
+        time.sleep(0.5)
+        p.send_signal(signal.SIGINT)
+        stdout, rest = p.communicate(timeout=30)  # not the 60 s of training
+    finally:
+        if p.poll() is None:
+            p.kill()
+    err = (err + rest).decode(errors="replace")
+    assert p.returncode == 130 and "Traceback" not in err, err
+    stats = json.loads((tmp_path / "p.json").read_text())
+    assert stats["interrupted"] is True and stats["nonfinite_samples"] == 0 and stats["spp"] == 8
+    img = tracer.read_image(out)
+    assert img.shape == (24, 24, 3) and np.isfinite(img).all() and img.mean() > 0
 
 
 def test_library_errors_are_tracer_errors(tmp_path):

@@ -40,7 +40,8 @@ def _parser():
                         "vertices, half-vector copy elsewhere) or replay (the same random numbers)")
     p.add_argument("--shift-roughness", type=float, default=0.001, metavar="R",
                    help="gpt, hybrid shift: vertices rougher than R (GGX alpha) are reconnected (default 0.001)")
-    p.add_argument("--recon", default="l1", help="gpt: screened Poisson reconstruction l1 (default), l2, gradnet "
+    p.add_argument("--recon", default="l2", help="gpt: screened Poisson reconstruction l2 (default: keeps the "
+                                                 "image mean), l1 (robust to outliers, darker at low spp), gradnet "
                                                  "(learned), or none (the base image)")
     p.add_argument("--recon-opt", action="append", default=[], metavar="KEY=VALUE",
                    help="gpt: a setting of the reconstruction, repeatable (gradnet: weights=NAME, correction=0|1)")
@@ -66,7 +67,10 @@ def _parser():
                    help="stops added to the PNG preview's automatic exposure (default 0); the EXR is not changed")
     p.add_argument("--variance", action="store_true",
                    help="also write <name>.variance.exr, the variance of each pixel's mean")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar and no compile notice (the summary line is still printed)")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="also show notes that change no pixel (e.g. zero-area triangles skipped)")
     p.add_argument("--list-guides", action="store_true", help="print the guides, their settings and defaults")
     p.add_argument("--version", action="store_true", help="print the version and exit")
     return p
@@ -157,8 +161,8 @@ def _list_guides():
     from .guiding import REGISTRY, guide_settings
 
     for name, (factory, _) in REGISTRY.items():
-        doc = (factory.__doc__ or "").strip().splitlines()[0] if factory is not None else \
-            "BSDF importance sampling only (no guide)"
+        doc = " ".join(line.strip() for line in (factory.__doc__ or "").strip().split("\n\n")[0].splitlines()) \
+            if factory is not None else "BSDF importance sampling only (no guide)."
         doc = re.sub(r"^`--guide \w+`:\s*", "", doc)
         settings = guide_settings(name)
         print(f"{name}: {doc}")
@@ -176,7 +180,7 @@ def _compile_notice(guide, accel):
     names = ["integrator.shade"] + (["photons.scatter", "spatial.accumulate"] if guide != "bsdf" else []) + \
         (["numba_bvh._intersect_batch"] if accel == "numba" else [])
     if not _jit.kernels_cached(*names):
-        _note("compiling the kernels (about 30 s, once per install or update of the tracer) ...")
+        _note("compiling the kernels (about 40 s, more with a guide or gpt; once per install or update of the tracer) ...")
 
 
 def _note(text):
@@ -186,18 +190,22 @@ def _note(text):
 
 
 class _Warnings(logging.Handler):
-    """The tracer's warnings as `tracer: warning: ...` lines on stderr, held back while `hold`
-    (until the input has been checked) and dropped if the run then fails on bad input."""
+    """The tracer's warnings as `tracer: warning: ...` lines on stderr (with -v, its notes as
+    `tracer: note: ...` too), held back while `hold` (until the input has been checked) and
+    dropped if the run then fails on bad input."""
 
     def __init__(self):
-        super().__init__(logging.WARNING)
+        super().__init__(logging.INFO)
         self.hold, self.held = True, []
+        self.verbose = False
 
     def emit(self, record):
         if self.hold:
             self.held.append(record)
-        else:
+        elif record.levelno >= logging.WARNING:
             _note(f"warning: {record.getMessage()}")
+        elif self.verbose:
+            _note(f"note: {record.getMessage()}")
 
     def show_held(self):  # (not `release`: logging.Handler's lock method)
         self.hold = False
@@ -208,10 +216,11 @@ class _Warnings(logging.Handler):
 
 def _run(argv, warnings):
     from . import metrics
-    from .render import DEFAULT_WAVE, _check_crop, render, write_outputs
+    from .render import DEFAULT_WAVE, _check_crop, check_memory, render, write_outputs
     from .scene import load_scene
 
     args = _parser().parse_args(argv)
+    warnings.verbose = args.verbose
     if args.version:
         from . import __version__
 
@@ -236,7 +245,7 @@ def _run(argv, warnings):
     if args.accel not in ACCELS:
         raise unknown_name("accel", args.accel, ACCELS)
     guide_settings = _guide_opts(args.guide_opt)
-    make_guide(args.guide, **guide_settings)  # unknown names and settings fail here, before the scene loads
+    guide = make_guide(args.guide, **guide_settings)  # unknown names and settings fail here, before the scene loads
     from . import gradient
 
     if args.integrator not in gradient.INTEGRATORS:
@@ -263,6 +272,9 @@ def _run(argv, warnings):
         if min(ref.shape[:2]) < 3:
             raise TracerError(f"{args.reference}: the {ref.shape[1]}x{ref.shape[0]} window is too small for "
                               "1-SSIM (at least 3x3)")
+    check_memory(scene, _check_crop(crop, scene.width, scene.height), args.wave_size or DEFAULT_WAVE,
+                 None if args.time is not None else (args.spp or scene.render.spp), guide, args.integrator, args.shift,
+                 args.recon)
     _make_folder(out_dir, out)
     warnings.show_held()  # the input is good: show what loading it found
     if not args.quiet:
@@ -276,18 +288,18 @@ def _run(argv, warnings):
                     shift_roughness=args.shift_roughness, recon_settings=recon_settings)
     if ref is not None:
         result.stats["metrics"] = metrics.all_metrics(result.image, ref)
-    exr, png, js = write_outputs(result, out, exposure=args.exposure, variance=args.variance)
+    exr, png, js = write_outputs(result, out, exposure=args.exposure, variance=args.variance, reference=ref)
     s = result.stats
-    if not args.quiet:
-        if s["interrupted"]:
-            note = f" (interrupted; every pixel has at least {s['spp']})" if s["spp_mean"] != s["spp"] else \
-                " (interrupted)"
-        else:
-            note = ""
-        print(f"{exr}: {s['width']}x{s['height']}, {s['spp_mean']:.0f} spp{note} in {s['time_total']:.2f} s, "
-              f"{s['msamples_per_s']:.2f} Msamples/s, {s['mrays_per_s']:.2f} Mrays/s; preview {png}, stats {js}")
-        if ref is not None:
-            print("  ".join(f"{k} {v:.6g}" for k, v in s["metrics"].items()))
+    if s["interrupted"]:
+        note = f" (interrupted; every pixel has at least {s['spp']})" if s["spp_mean"] != s["spp"] else \
+            " (interrupted)"
+    else:
+        note = ""
+    print(f"{exr}: {s['width']}x{s['height']}, {s['spp_mean']:.0f} spp{note} in {s['time_total']:.2f} s, "
+          f"{s['msamples_per_s']:.2f} Msamples/s, {s['mrays_per_s']:.2f} Mrays/s; preview {png} "
+          f"(exposure {s['preview_exposure']:+.2f} EV{', the reference' + chr(39) + 's' if ref is not None else ''}), stats {js}")
+    if ref is not None:
+        print("  ".join(f"{k} {v:.6g}" for k, v in s["metrics"].items()))
     return EXIT_INTERRUPTED if s["interrupted"] else 0
 
 
@@ -316,7 +328,7 @@ def main(argv=None):
     warnings = _Warnings()
     log.addHandler(warnings)
     log.propagate = False
-    log.setLevel(logging.WARNING)
+    log.setLevel(logging.INFO)
     try:
         return _run(sys.argv[1:] if argv is None else argv, warnings)
     except TracerError as e:

@@ -25,19 +25,33 @@ def srgb_encode(linear):
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
-def auto_exposure(linear):
-    """Scale that maps the log-average luminance of the lit pixels to KEY (middle grey after `filmic`).
+_ROWS = 64  # rows per band where a whole image would need float64 temporaries
+EXPOSURE_BLOCKS = 32  # auto_exposure averages blocks of 1/32 of the image's shorter side
 
-    Black pixels (background, no sample) and non-finite ones are left out, so that an object
-    against black, an emitter or a firefly does not set the exposure; 1.0 when nothing is lit."""
+
+def auto_exposure(linear):
+    """Scale that maps the log-average luminance of the image's lit blocks to KEY (middle grey
+    after `filmic`).
+
+    The luminance is first averaged over square blocks (1/EXPOSURE_BLOCKS of the shorter side, at
+    least one pixel; the rows and columns past the last whole block are left out): a block mean
+    of a Monte Carlo image is nearly free of its noise, so renders of one scene by methods with
+    different noise (a sampler that leaves many pixels black and others bright, say) get the same
+    exposure, where a log-average over pixels would darken the noisier one. Black blocks
+    (background, no sample) are left out, so that an object against black does not set the
+    exposure, and so are non-finite pixels (counted as black); 1.0 when nothing is lit."""
     a = np.asarray(linear, dtype=np.float64)
     if a.ndim == 2:
         a = a[:, :, None]
     lum = a[..., :3] @ _LUMA[: a.shape[-1]] if a.shape[-1] >= 3 else a[..., 0]
-    lum = lum[np.isfinite(lum) & (lum > 0.0)]
-    if lum.size == 0:
+    lum = np.where(np.isfinite(lum), lum, 0.0)
+    b = max(1, min(lum.shape) // EXPOSURE_BLOCKS)
+    h, w = lum.shape[0] // b * b, lum.shape[1] // b * b
+    blocks = lum[:h, :w].reshape(h // b, b, w // b, b).mean(axis=(1, 3))
+    blocks = blocks[blocks > 0.0]
+    if blocks.size == 0:
         return 1.0
-    return float(KEY / np.exp(np.mean(np.log(lum))))
+    return float(KEY / np.exp(np.mean(np.log(blocks))))
 
 
 def filmic(x):
@@ -53,9 +67,18 @@ def tonemap(linear, exposure=0.0, auto=True):
     applies the sRGB curve). The radiance is scaled by 2^exposure times, if `auto`, the automatic
     exposure (auto_exposure: log-average luminance to middle grey), then goes through `filmic` per channel.
     NaN and -inf give 0, +inf gives 1."""
-    a = np.asarray(linear, dtype=np.float64)
-    scale = 2.0 ** float(exposure) * (auto_exposure(a) if auto else 1.0)
-    return filmic(a * scale)
+    scale = 2.0 ** float(exposure) * (auto_exposure(linear) if auto else 1.0)
+    return filmic(np.asarray(linear, dtype=np.float64) * scale)
+
+
+def preview(linear, stops):
+    """tonemap(linear, stops, auto=False) as float32, computed in bands of rows (its float64
+    temporaries stay small on a large image): what write_outputs turns into the PNG."""
+    a = np.asarray(linear)
+    out = np.empty(a.shape, np.float32)
+    for r in range(0, a.shape[0], _ROWS):
+        out[r:r + _ROWS] = tonemap(a[r:r + _ROWS], stops, auto=False)
+    return out
 
 
 def _one_line(text, default):
@@ -112,7 +135,9 @@ def write_image(path, array, channel_names=None):
         pixels = np.ascontiguousarray(a)
     else:
         spec = oiio.ImageSpec(w, h, c, "uint8")
-        pixels = np.ascontiguousarray(np.round(srgb_encode(a) * 255.0).astype(np.uint8))
+        pixels = np.empty((h, w, c), np.uint8)
+        for r in range(0, h, _ROWS):  # in bands of rows: the float64 temporaries stay small
+            pixels[r:r + _ROWS] = np.round(srgb_encode(a[r:r + _ROWS]) * 255.0)
     if channel_names is not None:
         spec.channelnames = tuple(channel_names)
 

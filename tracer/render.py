@@ -9,6 +9,7 @@ rendered so far (see render()). `make_context` and session.trace_source trace an
 (tracer.sources) outside a render.
 """
 import json
+import logging
 import math
 import os
 import signal
@@ -19,12 +20,12 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from . import gradient
+from . import gradient, memory
 from .bvh import make_accel
 from .bvh.numba_bvh import _NumbaThreads
 from .context import RenderContext
 from .errors import SettingsError, unknown_name
-from .film import Film, combine_films
+from .film import Film, aovs_of, combine_films
 from .guiding import make_guide, warm_up_guides
 from .guiding.base import Guide
 from .integrator import trace_wave
@@ -36,6 +37,7 @@ from .splitting import warm_up_splitting
 from .wave import Stats, WaveBuffers
 
 DEFAULT_WAVE = 1 << 16
+log = logging.getLogger("tracer")
 FILTERS = ("box", "point")
 
 
@@ -79,12 +81,14 @@ def _int_setting(name, value, lo):
 
 def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=None, seed=None,
            accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
-           guide_settings=None, pixel_filter="box", crop=None, integrator="path", shift="hybrid", recon="l1",
+           guide_settings=None, pixel_filter="box", crop=None, integrator="path", shift="hybrid", recon="l2",
            recon_alpha=0.2, shift_roughness=gradient.ROUGHNESS, recon_settings=None):
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
     spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
-    time       wall-clock budget in seconds for the whole render (instead of spp), learning included
+    time       wall-clock budget in seconds (instead of spp): the accel's build, learning,
+               inference, the passes and gpt's solve, not the kernels' compile; the last pass is
+               cut at the deadline (stats: time_total, the budget's clock; time_render, the passes')
     guide      registered sampler name (tracer.guiding.guide_names()); guide_settings: dict of its
                settings (an unknown one is an error listing the valid ones). A guide object (e.g.
                tracer.guiding.make_guide("photon", ...)) is accepted too, and can be inspected after.
@@ -98,13 +102,15 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                samples as in the full render)
     integrator "path" (unidirectional path tracing) or "gpt" (gradient-domain path tracing,
                tracer.gradient: bsdf sampling only): shift "hybrid" (reconnecting vertices rougher
-               than shift_roughness) or "replay"; recon "l1", "l2" (screened Poisson, with weight
-               recon_alpha on the base), "gradnet" (the learned reconstruction; recon_settings
-               {"weights": name, "correction": 0 or 1}, tracer.gradient.RECON_DEFAULTS) or "none"
-               (the base image). The result's image is then the reconstruction, its variance the
-               base image's, and result.buffers holds base, dx, dy (with variances), direct,
-               indirect, albedo, normal and depth; stats time the passes and the solve
-               (time_solve). `callback` gets the base image's film after each of gpt's passes.
+               than shift_roughness) or "replay"; recon "l2" (the default) or "l1" (screened
+               Poisson, with weight recon_alpha on the base; l1 is darker at low spp), "gradnet"
+               (the learned reconstruction; recon_settings {"weights": name, "correction": 0 or
+               1}, tracer.gradient.RECON_DEFAULTS) or "none" (the base image). The result's image
+               is then the reconstruction, its variance the base image's, and result.buffers holds
+               base, dx, dy (with variances), direct, indirect, albedo, normal and depth; stats time
+               the passes and the solve (time_solve) and give recon_mean_change (the image mean
+               over the base's, less 1) and negative_pixel_share. `callback` gets the base image's
+               film after each of gpt's passes.
 
     The method runs its own schedule of passes (guide.schedule(session), tracer.session): BSDF
     sampling and guides that learn nothing render final passes alone; `grid` and `photon` run
@@ -135,6 +141,24 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
         return _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress,
                        callback, guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha,
                        shift_roughness, recon_settings)
+
+
+def check_memory(scene, crop, wave_size, spp, guide, integrator="path", shift="hybrid", recon="l2"):
+    """SettingsError (naming the scene, what the render needs and what the machine has) if a render
+    of the crop window (x0, y0, w, h) would not fit in memory (tracer.memory); else the wave size
+    the render will use. spp None: a time budget. Called before anything is allocated."""
+    npix = crop[2] * crop[3]
+    wave = min(wave_size, npix * (spp if spp is not None else 1024))
+    wave_bytes = WaveBuffers.bytes_for(wave, split=guide is not None and guide.splits)
+    if integrator == "gpt" and shift == "hybrid":
+        from .gradient.hybrid import HybridBuffers
+
+        wave_bytes += HybridBuffers.bytes_for(wave)
+    try:
+        memory.check(crop[2], crop[3], memory.estimate(npix, scene.n_triangles, wave_bytes, guide, integrator, recon))
+    except SettingsError as e:
+        raise SettingsError(f"{scene.path}: {e}") from None
+    return wave
 
 
 def _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop):
@@ -194,6 +218,9 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         if guide_settings:
             raise SettingsError("guide_settings go with a guide name, not with a guide object")
 
+    npix = crop[2] * crop[3]
+    wave = check_memory(scene, crop, wave_size, spp if time is None else None, g, integrator, shift, recon)
+
     t_start = _time.perf_counter()
     acc = make_accel(accel, scene.tri, threads=n_threads)
     lights = build_lights(scene)
@@ -213,11 +240,10 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         gradient.warm_up(ctx, shift, shift_roughness)
     t_compile = _time.perf_counter() - t0
     t_start = _time.perf_counter() - t_setup  # the budget counts the scene set-up, not the compile
-    npix = ctx.n_pixels
     if g is not None:
         g.prepare(scene, ctx)
         ctx.guide_state = g.state()
-    buf = WaveBuffers(min(wave_size, npix * (spp if time is None else 1024)), split=splits)
+    buf = WaveBuffers(wave, split=splits)
     stats = Stats()
     bar = None
     if progress:
@@ -235,23 +261,25 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
             settings.update(shift_roughness=shift_roughness)
 
     def snapshot():
-        return _stats(scene, stats, session.passes, session.sample0, t_setup, t_render, settings, t_compile, g)
+        return _stats(scene, stats, session.passes, session.sample0, t_setup, t_start, t_render, settings, t_compile,
+                      g)
 
     sigint = _Sigint()
+    reserve = 0.0
+    if integrator == "gpt" and time is not None:
+        reserve = gradient.solve_time_estimate(recon, crop[2], crop[3], recon_alpha, recon_settings)
     session = Session(ctx, g, buf, stats, spp if time is None else None, time, t_start, bar, callback, snapshot,
-                      lambda: sigint.requested)
+                      lambda: sigint.requested, reserve=reserve)
     interrupted = False
     t_render = _time.perf_counter()
     gfilms = gradient.GradientFilms(crop[2], crop[3]) if integrator == "gpt" else None
     try:
         sigint.install()
         if gfilms is not None:
-            reserve = gradient.solve_time_estimate(recon, crop[2], crop[3], recon_alpha, recon_settings) \
-                if time is not None else 0.0
-            gradient.gradient_passes(ctx, buf, stats, gfilms, session.passes, spp=spp, time=time, t_start=t_start,
-                                     reserve=reserve, before_wave=session._before_wave,
-                                     after_wave=session._after_wave, shift=shift, roughness=shift_roughness,
-                                     after_pass=lambda film: _gpt_after_pass(session, film))
+            gradient.gradient_passes(ctx, buf, stats, gfilms, session.passes, spp=spp, time=time,
+                                     time_left=session.time_left, limit=session.wave_limit,
+                                     before_wave=session._before_wave, after_wave=session._after_wave, shift=shift,
+                                     roughness=shift_roughness, after_pass=lambda film: _gpt_after_pass(session, film))
         elif g is None:
             session.final_passes()
         else:
@@ -267,35 +295,70 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
             bar.close()
     if gfilms is not None:
         return _gpt_result(gfilms, stats, snapshot, session, interrupted, recon, recon_alpha, recon_settings)
-    st = snapshot()
-    st["interrupted"] = interrupted
     films = session.films or [(session.final, "final")]
     image, variance, weights = combine_films([f for f, _ in films], [k for _, k in films])
+    image, variance = image.astype(np.float32), variance.astype(np.float32)
+    aovs = aovs_of([f for f, _ in films])
+    st = snapshot()
+    st["interrupted"] = interrupted
     for p_entry in st["passes"]:
         p_entry["weight"] = weights[p_entry.pop("film")]
-    aov_film = Film(crop[2], crop[3])
-    for f, _ in films:
-        aov_film.count += f.count
-        aov_film.aov += f.aov
-    return RenderResult(image.astype(np.float32), variance.astype(np.float32), aov_film.aovs(), st, session.final)
+    _report_dark(scene, image, st)
+    return RenderResult(image, variance, aovs, st, session.final)
+
+
+DARK_SHARE = 0.01  # a finished image with fewer lit pixels than this is reported
+
+
+def _report_dark(scene, image, stats):
+    """stats["lit_share"]: the share of pixels whose luminance is above zero; a warning on the
+    'tracer' logger, with the likely cause, when it is below DARK_SHARE."""
+    from .framing import lit_share
+
+    share = stats["lit_share"] = lit_share(image)
+    if share >= DARK_SHARE or stats["samples"] == 0:
+        return
+    what = "the image is black: no path reached a light" if share == 0.0 else \
+        f"only {share:.2%} of the pixels received light"
+    sidecar = os.path.splitext(scene.path)[0] + ".json"
+    if scene.framing:
+        cause = (f"the scene gives no camera and the framed view ({scene.framing}) sees little light; "
+                 f"give camera.origin and camera.target in {sidecar}")
+    elif stats["max_depth"] == 1:
+        cause = "max depth 1 shows only the emitters the camera sees directly"
+    else:
+        cause = (f"the camera ({sidecar}) may look past the scene or at the backs of walls, or the lights may face "
+                 "away (an MTL Ke emits from the counter-clockwise side only)")
+    log.warning(f"{scene.path}: {what}; {cause}")
+
+
+def _gpt_spp(passes):
+    """Samples every pixel has after gpt's passes (of a pass cut at the budget's end, its whole sweeps)."""
+    return sum(p.get("sweeps", p["spp"]) for p in passes)
 
 
 def _gpt_after_pass(session, film):
     """The callback after a gpt pass, with the samples per pixel done so far in the stats."""
-    session.sample0 = sum(p["spp"] for p in session.passes)
+    session.sample0 = _gpt_spp(session.passes)
     session.after_pass(film)
 
 
 def _gpt_result(gfilms, stats, snapshot, session, interrupted, recon, alpha, recon_settings):
     """The RenderResult of a gradient-domain render: the reconstruction, and the buffers."""
     stats.samples = int(gfilms.base.count.sum())  # base samples (each traced five paths and five first hits)
-    session.sample0 = sum(p["spp"] for p in session.passes)
+    session.sample0 = _gpt_spp(session.passes)
     image, buffers, t_solve = gradient.solve(gfilms, recon, alpha, recon_settings)
     st = snapshot()
     st["interrupted"] = interrupted
     st["time_solve"] = t_solve  # included in time_total
+    base_mean = float(np.mean(buffers["base"], dtype=np.float64))
+    # what the reconstruction did to the image's mean (l2 keeps it; l1 tends toward the median of
+    # the base's samples, darker at low spp: docs/gradient.md), and its negative pixels
+    st["recon_mean_change"] = float(np.mean(image, dtype=np.float64)) / base_mean - 1.0 if base_mean > 0 else 0.0
+    st["negative_pixel_share"] = float((image.min(axis=2) < 0.0).mean())
     if recon == "gradnet":
         st["time_inference"] = t_solve  # the network and its energy correction
+    _report_dark(session.ctx.scene, image, st)
     return RenderResult(image.astype(np.float32), buffers["base_variance"], gfilms.base.aovs(), st, gfilms.base,
                         buffers)
 
@@ -325,8 +388,9 @@ class _Sigint:
             self._installed = False
 
 
-def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile, guide=None):
-    elapsed = _time.perf_counter() - t_render
+def _stats(scene, stats, passes, spp, t_setup, t_start, t_render, settings, t_compile, guide=None):
+    now = _time.perf_counter()
+    elapsed = now - t_render
     samples = stats.samples
     rays = stats.rays + stats.shadow_rays
     return {
@@ -342,7 +406,8 @@ def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile, gu
         "shadow_rays": int(stats.shadow_rays),
         "time_setup": t_setup,
         "time_compile": t_compile,
-        "time_total": elapsed,
+        "time_total": now - t_start,  # what a time budget counts: set-up, learning, passes, solve
+        "time_render": elapsed,  # from the first pass on (what Msamples/s divide by)
         "time_stages": dict(stats.time),
         "msamples_per_s": samples / elapsed / 1e6 if elapsed > 0 else 0.0,
         "mrays_per_s": rays / elapsed / 1e6 if elapsed > 0 else 0.0,
@@ -359,23 +424,26 @@ def _stats(scene, stats, passes, spp, t_setup, t_render, settings, t_compile, gu
     }
 
 
-def write_outputs(result, path, exposure=0.0, variance=False):
+def write_outputs(result, path, exposure=0.0, variance=False, reference=None):
     """Write `path` (EXR, RGB, linear), a PNG preview, `<name>.aovs.exr` (albedo, normal, depth),
     with `variance` `<name>.variance.exr` (result.variance, the variance of each pixel's mean), for
     a gradient-domain render `<name>.base.exr`, `.dx.exr`, `.dy.exr`, and a stats JSON beside it;
     returns the paths of the EXR, the PNG and the JSON.
 
-    The PNG is imageio.tonemap(image, exposure): automatic exposure (log-average luminance to
-    middle grey) plus `exposure` stops, the ACES filmic curve, sRGB; the JSON records the stops applied
-    (preview_exposure). Each file is written under a temporary name and renamed into place."""
-    from .imageio import auto_exposure, replace_atomically, tonemap, write_image
+    The PNG is imageio.tonemap: automatic exposure (imageio.auto_exposure: the log-average of block
+    means to middle grey) of the image, or of `reference` (an (H, W, 3) image of the same scene)
+    when given, so that previews of several methods share one exposure; plus `exposure` stops, the
+    ACES filmic curve, sRGB. The stops applied go to result.stats["preview_exposure"] and the JSON.
+    Each file is written under a temporary name and renamed into place."""
+    from .imageio import auto_exposure, preview, replace_atomically, write_image
 
     base, ext = os.path.splitext(os.fspath(path))
     if ext.lower() != ".exr":
         raise SettingsError(f"{path}: output must be an .exr file (a PNG and a JSON are written beside it)")
     write_image(path, result.image)
     png = base + ".png"
-    write_image(png, tonemap(result.image, exposure))
+    stops = float(exposure) + math.log2(auto_exposure(result.image if reference is None else reference))
+    write_image(png, preview(result.image, stops))
     a = result.aovs
     write_image(base + ".aovs.exr", np.concatenate([a["albedo"], a["normal"], a["depth"]], axis=2),
                 channel_names=("albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z"))
@@ -385,8 +453,8 @@ def write_outputs(result, path, exposure=0.0, variance=False):
         if name in result.buffers:
             write_image(f"{base}.{name}.exr", result.buffers[name])
     js = base + ".json"
-    stats = dict(result.stats, preview_exposure=float(exposure) + math.log2(auto_exposure(result.image)))
-    text = json.dumps(stats, indent=1)
+    result.stats["preview_exposure"] = stops
+    text = json.dumps(result.stats, indent=1)
 
     def write_json(tmp):
         with open(tmp, "w", encoding="utf-8") as f:

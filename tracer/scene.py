@@ -27,6 +27,7 @@ import numpy as np
 from . import bsdfs
 from .camera import Camera
 from .errors import SceneError, SettingsError
+from .framing import frame_camera, outside_view
 from .objread import read_obj, triangle_areas
 
 log = logging.getLogger("tracer")
@@ -113,6 +114,7 @@ class Scene:
     environment: Environment | None
     bounds: np.ndarray  # (2, 3) float64
     warnings: list = field(default_factory=list)
+    framing: str = ""  # how a camera the scene did not give was chosen (tracer.framing); "" if it gave one
 
     @property
     def n_triangles(self):
@@ -132,9 +134,11 @@ class Scene:
 
 
 # --- Reading files ---------------------------------------------------------------------------
-def _warn(scene_warnings, msg):
+def _warn(scene_warnings, msg, level=logging.WARNING):
+    """Record `msg` in the scene's warnings and log it (at `level`: INFO for what changes no pixel,
+    which the command line shows only with -v)."""
     scene_warnings.append(msg)
-    log.warning(msg)
+    log.log(level, msg)
 
 
 def _read_json(path):
@@ -185,6 +189,15 @@ def _read_bytes(path, what):
         raise SceneError(f"{path}: {what} file not found") from None
     except OSError as e:
         raise SceneError(f"{path}: cannot read {what} ({e.strerror})") from None
+
+
+def _check_text(path, data, what):
+    """SceneError unless `data` (a file's bytes) looks like text: a NUL byte in its first 64 KiB
+    (and no UTF-16 byte-order mark) means a binary file, e.g. a binary PLY or FBX named .obj."""
+    head = data[:65536]
+    nul = head.find(b"\x00")
+    if nul >= 0 and not head.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise SceneError(f"{path}: not a text {what} file (it holds binary data: a zero byte at offset {nul})")
 
 
 def read_text(path, what):
@@ -418,7 +431,10 @@ def read_geometry(obj_path):
     OBJ: through the parallel reader (tracer.objread) when the file is made of the statements it
     reads, else checked line by line (errors name the line) and read by trimesh; both give the
     same triangles in the same order."""
-    fast = read_obj(_read_bytes(obj_path, "OBJ"))  # (read_obj frees the bytes once parsed)
+    data = _read_bytes(obj_path, "OBJ")
+    _check_text(obj_path, data, "OBJ")
+    fast = read_obj(data)  # (read_obj frees the bytes once parsed)
+    del data
     if fast is not None:
         return fast
     scan = scan_obj(obj_path)
@@ -520,7 +536,7 @@ def load_scene(path, **overrides):
     keep = area2 > (1e-12 * float(np.linalg.norm(bounds[1] - bounds[0]))) ** 2
     del area2
     if not np.all(keep):
-        _warn(warnings, f"{obj_path}: skipped {int((~keep).sum())} zero-area triangle(s)")
+        _warn(warnings, f"{obj_path}: skipped {int((~keep).sum())} zero-area triangle(s)", logging.INFO)
         tri, tri_material = tri[keep], tri_material[keep]
         if tri.shape[0] == 0:
             raise SceneError(f"{obj_path}: every triangle has zero area")
@@ -543,30 +559,21 @@ def load_scene(path, **overrides):
     if settings.max_depth == 0:
         raise SceneError(f"{sidecar_path}: render.max_depth must be -1 (unlimited) or >= 1")
 
-    # Camera: from the sidecar, or framed on the bounding box
+    # Camera: from the sidecar, or framed (below, once the scene is known to have a light)
+    fov = _number(f"{sidecar_path}: camera.fov", cam.get("fov", 45.0))
+    if not 0.0 < fov < 180.0:
+        raise SceneError(f"{sidecar_path}: camera: fov must be in (0, 180) degrees, got {fov}")
+    fov_axis = cam.get("fov_axis", "x")
+    framed = not ({"origin", "target"} & set(cam))
     if {"origin", "target"} <= set(cam):
         origin = _vec3(f"{sidecar_path}: camera.origin", cam["origin"])
         target = _vec3(f"{sidecar_path}: camera.target", cam["target"])
-    elif "origin" in cam or "target" in cam:
+    elif not framed:
         raise SceneError(f"{sidecar_path}: camera needs both origin and target")
     else:
-        centre = 0.5 * (bounds[0] + bounds[1])
-        extent = bounds[1] - bounds[0]
-        fov = float(cam.get("fov", 45.0))
-        dist = 0.5 * float(np.linalg.norm(extent)) / math.tan(math.radians(fov) / 2.0)
-        target = centre
-        origin = centre + np.array([0.0, 0.0, extent[2] / 2.0 + dist])
+        origin, target, _ = outside_view(bounds, fov)
     up = _vec3(f"{sidecar_path}: camera.up", cam.get("up", [0.0, 1.0, 0.0]))
-    camera = Camera.look_at(
-        origin,
-        target,
-        up,
-        _number(f"{sidecar_path}: camera.fov", cam.get("fov", 45.0)),
-        cam.get("fov_axis", "x"),
-        width,
-        height,
-        where=f"{sidecar_path}: camera",
-    )
+    camera = Camera.look_at(origin, target, up, fov, fov_axis, width, height, where=f"{sidecar_path}: camera")
 
     environment = _load_environment(sidecar.get("environment"), sidecar_path)
     scene = Scene(
@@ -590,6 +597,13 @@ def load_scene(path, **overrides):
         raise SceneError(
             f"{scene.path}: the scene has no light: no material with Ke > 0 and no environment in the sidecar{hint}"
         )
+    if framed:
+        (origin, target, view_up), scene.framing = frame_camera(scene, fov, fov_axis)
+        forward = (target - origin) / np.linalg.norm(target - origin)
+        if "up" in cam and np.linalg.norm(np.cross(forward, up)) > 1e-6 * np.linalg.norm(up):
+            view_up = up  # the sidecar's up, unless the chosen view looks along it
+        scene.camera = Camera.look_at(origin, target, view_up, fov, fov_axis, width, height,
+                                      where=f"{sidecar_path}: camera")
     return scene
 
 
@@ -602,6 +616,9 @@ def _load_environment(spec, where):
         if "radiance" in spec:
             raise SceneError(f"{where}: environment takes either 'radiance' or 'map', not both")
         map_path = os.path.join(os.path.dirname(where), str(spec["map"]))
+        if not os.path.isfile(map_path):
+            raise SceneError(f"{where}: environment.map {spec['map']!r} not found (looked for "
+                             f"{os.path.abspath(map_path)})")
         img = read_image(map_path, what="environment map").astype(np.float64)
         scale = _number(f"{where}: environment.scale", spec.get("scale", 1.0), lo=0.0)
         if img.shape[2] == 1:

@@ -7,6 +7,7 @@ learn=True calls the guide's observe and update), and ends with `final_passes`, 
 rest of the budget (spp or time) in doubling passes. The image combines the films by
 inverse variance (film.combine_films; pilot films are left out).
 """
+import math
 import time as _time
 
 from .film import Film
@@ -16,24 +17,34 @@ from .wave import Stats, WaveBuffers
 
 
 def trace_source(ctx, source, sink, spp=1, sample0=0, buf=None, stats=None, observe=None, direct=True, split=None,
-                 before_wave=None, after_wave=None):
+                 before_wave=None, after_wave=None, limit=None):
     """Trace every path of one pass of `source` (tracer.sources) into `sink` (a Film or a
     film.SampleSink), in waves of buf.size paths (buf: a wave.WaveBuffers, made for the pass if
     None). ctx: a RenderContext (render.make_context); spp: the pass's samples per pixel, for
     sources that count by it; sample0: the sample index it starts at. observe, direct, split: as
     integrator.trace_wave. before_wave(n) and after_wave(n), if given, are called before and after
-    each wave of n paths (they may raise to stop). Returns the wave.Stats."""
+    each wave of n paths (they may raise to stop). limit(n), if given, may cut the next wave to
+    fewer paths, or end the pass early with 0 (a time budget's last wave). Returns the wave.Stats."""
     total = source.count(ctx, spp)
     buf = WaveBuffers(max(1, min(total, 1 << 16)), split=split is not None) if buf is None else buf
     stats = Stats() if stats is None else stats
-    for g0 in range(0, total, buf.size):
+    g0 = 0
+    while g0 < total:
         n = min(buf.size, total - g0)
+        if limit is not None:
+            n = min(n, limit(n))
+            if n <= 0:
+                break
         if before_wave is not None:
             before_wave(n)
         trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=observe, direct=direct, split=split)
         if after_wave is not None:
             after_wave(n)
+        g0 += n
     return stats
+
+
+MIN_WAVE = 1024  # the shortest wave a time budget's end is cut to
 
 
 class Stop(Exception):
@@ -50,20 +61,41 @@ class Session:
     interrupted(): whether Ctrl-C asked to stop (checked between waves).
     """
 
-    def __init__(self, ctx, guide, buf, stats, spp, time, t_start, bar, callback, snapshot, interrupted):
+    def __init__(self, ctx, guide, buf, stats, spp, time, t_start, bar, callback, snapshot, interrupted, reserve=0.0):
         self.ctx, self.guide, self.buf, self.stats = ctx, guide, buf, stats
         self.spp, self.time, self.t_start = spp, time, t_start
+        self.reserve = reserve  # seconds of the budget kept for the work after the last pass
         self.bar, self.callback, self.snapshot, self.interrupted = bar, callback, snapshot, interrupted
         self.films = []  # (film, kind) of every pass group: "pilot", "train", "final", "discard"
-        self.passes = []  # one entry per pass: spp, time, kind, film index, time_update
+        self.passes = []  # one entry per pass: spp, time, kind, film index, time_update (partial, paths)
         self.sample0 = 0  # sample index the next pass starts at
         w, h = int(ctx.crop[2]), int(ctx.crop[3])
         self.final = Film(w, h)  # the final passes' film
         self.camera = CameraSource()
+        self.out_of_time = False  # a pass was cut short at the end of the budget
+        self._wave_t0 = 0.0
+        self._rate = None  # seconds per path of the latest pass that traced a wave
+        self._pass_paths = 0
+        self._pass_seconds = 0.0
 
     def elapsed(self):
         """Seconds of the budget spent so far."""
         return _time.perf_counter() - self.t_start
+
+    def time_left(self):
+        """Seconds of the budget left for passes (the reserve kept back); inf without a time budget."""
+        return float("inf") if self.time is None else self.time - self.reserve - self.elapsed()
+
+    def wave_limit(self, n):
+        """How many of the next wave's n paths fit in the time left, at the seconds per path of the
+        waves so far (this pass's, else the last pass's): n, fewer (at least MIN_WAVE), or 0 to end
+        the pass. The last waves of a time budget end it within a wave of MIN_WAVE paths."""
+        if self._rate is None or self.time is None:
+            return n
+        fit = int(self.time_left() / self._rate)
+        if fit >= n:
+            return n
+        return fit if fit >= MIN_WAVE else 0
 
     def new_film(self, kind):
         """Open a film for a group of passes of `kind` ("pilot" films get no weight in the image
@@ -77,27 +109,38 @@ class Session:
         return [f for f, _ in self.films]
 
     def phase(self, name):
-        """Show `name` (pilot, train t/T, final) on the progress bar of a guide that learns."""
-        if self.bar is not None and self.guide is not None and self.guide.learns:
+        """Show `name` (pilot, train t/T, learn, final, ...) on the progress bar of a render with a
+        guide (plain BSDF sampling keeps `render`)."""
+        if self.bar is not None and self.guide is not None:
             self.bar.set_description(name)
 
-    def run_pass(self, film, spp, kind, learn=False, source=None, split=None):
+    def run_pass(self, film, spp, kind, learn=False, source=None, split=None, deadline=False):
         """Render `spp` more samples per pixel from `source` (default: the camera) into `film`, in
         waves; with `learn`, the guide observes the vertices and updates after the pass. split: a
-        splitting.SplitPlan for the waves (final passes), or None. Raises KeyboardInterrupt between
-        waves after Ctrl-C, Stop when the callback returns False."""
+        splitting.SplitPlan for the waves (final passes), or None. deadline: with a time budget,
+        the pass ends when the budget does (wave_limit), its last sweep over the pixels partial
+        (those pixels get one sample more than the rest; out_of_time is set). Raises
+        KeyboardInterrupt between waves after Ctrl-C, Stop when the callback returns False."""
         ctx, buf, g = self.ctx, self.buf, self.guide
         source = self.camera if source is None else source
-        tp = _time.perf_counter()
-        observe = g.observe if learn else None
-        direct = g.learn_direct if g is not None else True
-        trace_source(ctx, source, film, spp, self.sample0, buf, self.stats, observe, direct, split, self._before_wave,
-                     self._after_wave)
-        self.sample0 += spp
         index = next((j for j, (f, _) in enumerate(self.films) if f is film), None)
         if index is None:
             raise ValueError("run_pass renders into a film opened with new_film (or the final film)")
+        tp = _time.perf_counter()
+        observe = g.observe if learn else None
+        direct = g.learn_direct if g is not None else True
+        self._pass_paths, self._pass_seconds = 0, 0.0
+        limit = self.wave_limit if deadline and self.time is not None else None
+        trace_source(ctx, source, film, spp, self.sample0, buf, self.stats, observe, direct, split, self._before_wave,
+                     self._after_wave, limit)
+        total = source.count(ctx, spp)
         entry = {"spp": spp, "time": _time.perf_counter() - tp, "kind": kind, "film": index}
+        if self._pass_paths < total:  # cut at the end of the budget: count the whole sweeps
+            self.out_of_time = True
+            entry.update(partial=True, paths=self._pass_paths)
+            self.sample0 += self._pass_paths * spp // total
+        else:
+            self.sample0 += spp
         if learn:
             tl = _time.perf_counter()
             g.update()
@@ -115,16 +158,21 @@ class Session:
     def _before_wave(self, n):
         if self.interrupted():
             raise KeyboardInterrupt  # between waves: every finished wave is whole in the film
+        self._wave_t0 = _time.perf_counter()
 
     def _after_wave(self, n):
+        self._pass_paths += n
+        self._pass_seconds += _time.perf_counter() - self._wave_t0
+        self._rate = self._pass_seconds / self._pass_paths
         if self.bar is not None:
             self.bar.update(n / self.ctx.n_pixels)
 
     def final_passes(self, split=None, source=None):
         """Fill the rest of the budget with final passes into self.final: each twice the last pass's
-        spp (the first as many as the last pass, or 1), up to `spp` in all, or, with a time budget,
-        while the next one fits in the time left at the final passes' speed so far. source: where
-        the paths start (default: the camera; e.g. a guiding.pss.WarpSource)."""
+        spp (the first as many as the last pass, or 1), up to `spp` in all; or, with a time budget,
+        each at most what the time left holds at the final passes' speed so far (rounded up), until
+        the budget ends, the last pass cut at the deadline (run_pass). source: where the paths
+        start (default: the camera; e.g. a guiding.pss.WarpSource)."""
         if not any(f is self.final for f, _ in self.films):
             self.films.append((self.final, "final"))
         self.phase("final")
@@ -137,12 +185,13 @@ class Session:
                     break
                 pass_spp = min(pass_spp, self.spp - self.sample0)
             else:
-                elapsed = self.elapsed()
-                if passes:
-                    ref = passes[first_final:] or passes[-1:]
-                    per_spp = sum(p["time"] for p in ref) / sum(p["spp"] for p in ref)
-                    pass_spp = min(pass_spp, int((self.time - elapsed) / per_spp))
-                    if pass_spp < 1:
-                        break
-            self.run_pass(self.final, pass_spp, "final", source=source, split=split)
+                left = self.time_left()
+                if self.out_of_time or left <= 0.0:
+                    break
+                if passes[first_final:]:
+                    ref = passes[first_final:]
+                    per_spp = sum(p["time"] for p in ref) / sum(p.get("paths", p["spp"] * self.ctx.n_pixels)
+                                                               / self.ctx.n_pixels for p in ref)
+                    pass_spp = max(1, min(pass_spp, math.ceil(left / per_spp)))
+            self.run_pass(self.final, pass_spp, "final", source=source, split=split, deadline=True)
             pass_spp *= 2

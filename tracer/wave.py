@@ -137,6 +137,13 @@ class WaveBuffers:
         self.sp_tmax = np.zeros(size)
         self._hits = ()  # hit arrays of a bounce with copies (copy_hits)
 
+    @staticmethod
+    def bytes_for(size, split=False):
+        """Bytes that WaveBuffers(size, split) allocates (measured on buffers of 1 and 2 paths)."""
+        b1, b2 = (sum(a.nbytes for a in vars(WaveBuffers(k, split)).values() if isinstance(a, np.ndarray))
+                  for k in (1, 2))
+        return b1 + (b2 - b1) * (size - 1)
+
     def copy_hits(self, *hits):
         """Arrays with room for `capacity` entries, of the dtypes of `hits` (t, prim, b1, b2): where
         split_paths writes a bounce's hits with its copies. Allocated once."""

@@ -90,6 +90,11 @@ class HybridBuffers:
         self.hit_prim = z(4, d=np.int64)
         self.sh_o, self.sh_d, self.sh_tmax = z(4, 3), z(4, 3), z(4)
 
+    @staticmethod
+    def bytes_for(size):
+        """Bytes that HybridBuffers(size) allocates."""
+        return sum(a.nbytes for a in vars(HybridBuffers(1)).values() if isinstance(a, np.ndarray)) * size
+
     def offset_state(self):
         """The offset arrays in the order the kernels take them."""
         return (self.alive, self.status, self.beta, self.R, self.x, self.prim, self.wo, self.pdf, self.delta,

@@ -15,6 +15,7 @@ the first hit emits, or the environment a camera ray escapes to: the integrator'
 its own buffer and is left out of the base and the gradients the solver sees; it is added back
 after the solve.
 """
+import math
 import time as _time
 
 import numpy as np
@@ -34,16 +35,20 @@ class _Discard:
 
 
 class GradientFilms:
-    """Per-pixel accumulators of a gradient-domain render (each a film.Film of the crop): base (the
-    path-traced image, direct light included), indirect (base less the direct light), direct, dx and
+    """Per-pixel accumulators of a gradient-domain render (each a film.Film of the crop, only the
+    base with AOVs): base (the path-traced image, direct light included), indirect (base less the direct light), direct, dx and
     dy (of the indirect part: dx at (x, y) estimates I(x + 1, y) - I(x, y), 2 samples per spp where
     both sides are inside the film)."""
 
     NAMES = ("base", "indirect", "direct", "dx", "dy")
 
     def __init__(self, width, height):
-        for name in self.NAMES:
-            setattr(self, name, Film(width, height))
+        for name in self.NAMES:  # the AOVs are read from the base film alone
+            setattr(self, name, Film(width, height, aovs=name == "base"))
+
+    @staticmethod
+    def bytes_per_pixel():
+        return Film.bytes_per_pixel() + 4 * Film.bytes_per_pixel(aovs=False)
 
 
 def trace_gradient_wave(ctx, buf, films, sample0, g0, n, stats):
@@ -85,14 +90,16 @@ _SINK = _Discard()
 _SHIFTED = tuple(CameraSource(shift=o) for o in OFFSETS)
 
 
-def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, t_start=None, reserve=0.0,
+def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, time_left=None, limit=None,
                     before_wave=None, after_wave=None, shift="replay", roughness=0.001, after_pass=None):
     """Render passes of 1, 2, 4, ... spp into `films` (GradientFilms) until `spp` in all, or, with
-    a time budget, while the next pass fits in `time - reserve` seconds after t_start; appends
-    {spp, time, kind} to `passes` after each. before_wave(n) and after_wave(n) are called around
-    each wave of n base paths (before_wave may raise to stop: the films keep every finished wave).
-    shift: "replay" (here) or "hybrid" (hybrid.py, reconnecting above `roughness`). after_pass(film)
-    is called after each pass with the base film (it may raise to stop)."""
+    a time budget (`time`), while time_left() (seconds) holds more: each pass at most what the time
+    left holds at the speed so far (rounded up), its waves cut by limit(n) (session.wave_limit: the
+    last sweep of the last pass partial); appends {spp, time, kind} (and partial, paths, sweeps)
+    to `passes` after each. before_wave(n) and after_wave(n) are called around each wave of n base
+    paths (before_wave may raise to stop: the films keep every finished wave). shift: "replay"
+    (here) or "hybrid" (hybrid.py, reconnecting above `roughness`). after_pass(film) is called
+    after each pass with the base film (it may raise to stop)."""
     if shift == "hybrid":
         from . import hybrid
 
@@ -111,22 +118,32 @@ def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, t_start
             if done >= spp:
                 break
             pass_spp = min(pass_spp, spp - done)
-        elif passes:
-            per_spp = sum(p["time"] for p in passes) / sum(p["spp"] for p in passes)
-            left = time - reserve - (_time.perf_counter() - t_start)
-            pass_spp = min(pass_spp, int(left / per_spp))
-            if pass_spp < 1:
+        else:
+            left = time_left()
+            if left <= 0.0 or (passes and passes[-1].get("partial")):
                 break
+            if passes:
+                per_spp = sum(p["time"] for p in passes) / sum(p.get("paths", p["spp"] * npix) / npix for p in passes)
+                pass_spp = max(1, min(pass_spp, math.ceil(left / per_spp)))
         tp = _time.perf_counter()
         total = pass_spp * npix
-        for g0 in range(0, total, buf.size):
+        g0 = 0
+        while g0 < total:
             m = min(buf.size, total - g0)
+            if limit is not None and time is not None:
+                m = min(m, limit(m))
+                if m <= 0:
+                    break
             if before_wave is not None:
                 before_wave(m)
             trace(done, g0, m)
             if after_wave is not None:
                 after_wave(m)
-        passes.append({"spp": pass_spp, "time": _time.perf_counter() - tp, "kind": "gradient"})
+            g0 += m
+        entry = {"spp": pass_spp, "time": _time.perf_counter() - tp, "kind": "gradient"}
+        if g0 < total:
+            entry.update(partial=True, paths=g0, sweeps=g0 // npix)
+        passes.append(entry)
         if after_pass is not None:
             after_pass(films.base)
         done += pass_spp

@@ -54,6 +54,10 @@ class Guide:
     time_update = 0.0  # seconds spent rebuilding maps between passes
     time_inference = 0.0  # seconds of network inference
     peak_memory = 0  # bytes
+    # memory the method holds beyond the final film and the result (tracer.memory): bytes per film
+    # pixel (its training films, per-pixel maps), and bytes that do not grow with the image
+    pixel_bytes = 0
+    fixed_bytes = 0
 
     @property
     def splits(self):

@@ -61,6 +61,7 @@ from numba import prange
 
 from .._jit import jit, kernel
 from ..errors import SettingsError
+from ..film import Film
 from ..splitting import WeightWindow, observe_outgoing, outgoing
 from .base import Guide, _float, _int
 from .directional import build_tables
@@ -158,6 +159,15 @@ class HistogramGuide(Guide):
     learns = True
     neural_maps = False  # whether the maps are photon maps, which the network was trained on
     DEFAULTS = {}
+    # memory per film pixel beyond the pilot's and training iterations' films (tracer.memory):
+    # the vertex records and split plan; measured by bench.memory (grid 1159, photon 2037 B/px in
+    # all with 4 iterations), less the films, plus 25% with the films
+    extra_pixel_bytes = 320
+    fixed_bytes = 64 << 20
+
+    @property
+    def pixel_bytes(self):
+        return int(1.25 * ((1 + self.iterations) * Film.bytes_per_pixel() + self.extra_pixel_bytes))
 
     def __init__(self, **settings):
         s = dict(self.DEFAULTS, **settings)
@@ -419,6 +429,7 @@ class PhotonGuide(HistogramGuide):
 
     name = "photon"
     neural_maps = True
+    extra_pixel_bytes = 1200
     # why each default: docs/guiding.md, "Defaults and where they were measured"
     # aim_env: environment photons start only where camera paths escaped (photons.EnvAim)
     DEFAULTS = dict(COMMON, split_c=4000.0, sigma=1.0, photons_per_pixel=2.0, light_guiding=0.0, split=2.0, window=3.0,

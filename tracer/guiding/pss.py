@@ -171,6 +171,10 @@ class PSSGuide(Guide):
 
     name = "pss"
     learns = False  # no vertex records: it learns from the candidate pass's samples
+    # memory (tracer.memory): the candidate film and its samples' luminance; bench.memory measured
+    # 509 B/px in all (229 beyond bsdf's), and 400 MB fixed (torch, the examples)
+    pixel_bytes = 320
+    fixed_bytes = 512 << 20
     DEFAULTS = {"condition": "pixel", "m": "auto", "layers": "auto", "width": "auto", "blocks": 1,
                 "defensive": 0.1, "target": "relative", "candidates": 8, "alpha": 6.0, "share": 0.3, "train_seconds": 20.0,
                 "epochs": 0, "batch": 1024, "lr": 1e-3, "max_examples": 1_000_000}
@@ -256,7 +260,9 @@ class PSSGuide(Guide):
         elif session.time is not None and seconds < MIN_LEARN_S:
             reason = f"too little time left to learn ({max(seconds, 0.0):.2f} s)"
         else:
-            reason = self.learn(ctx, film, sample0, seconds)
+            reason = self.learn(ctx, film, sample0, seconds, stop=session.interrupted)
+        if session.interrupted():  # Ctrl-C while learning: the image is the candidate pass's
+            raise KeyboardInterrupt
         self.peak_memory = self.memory_bytes()
         self.time_learning = _time.perf_counter() - t0
         self._stats.update(zero_share_uniform=film.zeros / max(film.added, 1), learning_s=self.time_learning,
@@ -300,8 +306,9 @@ class PSSGuide(Guide):
             f = np.where(f > 0, f / np.where(mean > 0, mean, 1.0), 0.0)
         return u, _pixel_xy(ctx, p), f
 
-    def learn(self, ctx, film, sample0, seconds):
-        """Fit the flow to the candidate pass; returns None, or why there is no warp."""
+    def learn(self, ctx, film, sample0, seconds, stop=None):
+        """Fit the flow to the candidate pass; returns None, or why there is no warp. stop(), if
+        given, is asked after every batch: True ends the training (Ctrl-C)."""
         from . import pss_flow
 
         self._stats.update(condition=self.condition, target=self.target, defensive=self.defensive)
@@ -336,7 +343,7 @@ class PSSGuide(Guide):
             for part, (yp, cp) in parts.items():
                 b, const = pss_flow.prepare_targets(yp[:, warped_columns(self.condition, m)])
                 data[m][part] = (b, None if cp is None else torch.from_numpy(cp), float(const[:65536].mean()))
-        runs = [_Fit(self, m, L, W, data[m]) for m, L, W in cands]
+        runs = [_Fit(self, m, L, W, data[m], stop) for m, L, W in cands]
         share = 0.5 if len(runs) > 1 else 1.0
         for r in runs:
             r.train(seconds * share / len(runs), self.epochs)
@@ -387,7 +394,7 @@ class _Fit:
     """One candidate flow trained by maximum likelihood on the resampled examples, with its best
     state by validation NLL."""
 
-    def __init__(self, guide, m, layers, width, data):
+    def __init__(self, guide, m, layers, width, data, stop=None):
         import torch
 
         from . import pss_flow
@@ -404,6 +411,7 @@ class _Fit:
         self.best_state = copy.deepcopy(self.flow.state_dict())  # the identity, until an epoch beats it
         self.epochs_done = 0
         self.gen = torch.Generator().manual_seed(1000 * m + 10 * layers + width)
+        self.stop = stop if stop is not None else (lambda: False)
 
     def _val(self, part="val"):
         b, c, const = self.data[part]
@@ -422,7 +430,7 @@ class _Fit:
         deadline = _time.perf_counter() + seconds
         done = 0
         self.flow.train()
-        while (epochs and done < epochs) or (not epochs and _time.perf_counter() < deadline):
+        while ((epochs and done < epochs) or (not epochs and _time.perf_counter() < deadline)) and not self.stop():
             perm = torch.randperm(n, generator=self.gen)
             for i in range(0, n, self.batch):
                 idx = perm[i:i + self.batch]
@@ -430,7 +438,7 @@ class _Fit:
                 self.opt.zero_grad()
                 loss.backward()
                 self.opt.step()
-                if not epochs and _time.perf_counter() >= deadline:
+                if (not epochs and _time.perf_counter() >= deadline) or self.stop():
                     break
             done += 1
             self.epochs_done += 1
