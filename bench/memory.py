@@ -7,10 +7,12 @@ processes (after a tiny render that fills Numba's cache: a compile peaks higher 
 over the difference in pixels, is the memory the method needs per pixel (the process, the scene
 and the wave buffers cancel). `--spp 64` runs the histogram guides' pilot and four training
 iterations, so that all their films are held. Printed beside tracer.memory's per-pixel estimate;
-the estimate should be the larger. Writes bench/results/memory.json and memory.md.
+the estimate should be the larger. Writes bench/results/memory.json and memory.md (keeping the rows
+of methods not run this time from an earlier run of the same sizes and spp).
 """
 import argparse
 import datetime
+import json
 import os
 import platform
 import subprocess
@@ -73,6 +75,15 @@ def main(argv=None):
                   flush=True)
     out = os.path.join(ROOT, "bench", "results")
     os.makedirs(out, exist_ok=True)
+    try:  # the rows of methods not run this time, from a run of the same sizes and spp
+        with open(os.path.join(out, "memory.json")) as f:
+            old = json.load(f)
+        if old["sizes"] == [small, large] and old["spp"] == a.spp:
+            ran = {r["method"] for r in rows}
+            rows = [r for r in old["rows"] if r["method"] not in ran] + rows
+            rows.sort(key=lambda r: list(METHODS).index(r["method"]))
+    except (OSError, ValueError, KeyError):
+        pass
     meta = {"command": "python -m bench.memory " + " ".join(argv if argv is not None else sys.argv[1:]),
             "machine": f"{platform.machine()}, {os.cpu_count()} cores", "date": datetime.date.today().isoformat(),
             "sizes": [small, large], "spp": a.spp}

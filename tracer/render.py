@@ -428,7 +428,7 @@ def write_outputs(result, path, exposure=0.0, variance=False, reference=None):
     """Write `path` (EXR, RGB, linear), a PNG preview, `<name>.aovs.exr` (albedo, normal, depth),
     with `variance` `<name>.variance.exr` (result.variance, the variance of each pixel's mean), for
     a gradient-domain render `<name>.base.exr`, `.dx.exr`, `.dy.exr`, and a stats JSON beside it;
-    returns the paths of the EXR, the PNG and the JSON.
+    returns the paths of the EXR, the PNG and the JSON. A missing folder is created.
 
     The PNG is imageio.tonemap: automatic exposure (imageio.auto_exposure: the log-average of block
     means to middle grey) of the image, or of `reference` (an (H, W, 3) image of the same scene)
@@ -440,6 +440,11 @@ def write_outputs(result, path, exposure=0.0, variance=False, reference=None):
     base, ext = os.path.splitext(os.fspath(path))
     if ext.lower() != ".exr":
         raise SettingsError(f"{path}: output must be an .exr file (a PNG and a JSON are written beside it)")
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        raise SettingsError(f"{path}: cannot create the folder {folder} ({e.strerror or e})") from None
     write_image(path, result.image)
     png = base + ".png"
     stops = float(exposure) + math.log2(auto_exposure(result.image if reference is None else reference))

@@ -242,9 +242,9 @@ class OdisGuide(Guide):
     name = "odis"
     learns = False  # the initial pass records vertices, but nothing is learned per scene
     # memory (tracer.memory): the per-pixel sampling tables (32 x 32 uint16 densities and row sums,
-    # 2.2 KB), the initial pass's film and samples; bench.memory measured 2662 B/px in all (2382
-    # beyond bsdf's), and 250 MB fixed (torch, the network)
-    pixel_bytes = 3000
+    # 2.2 KB), the initial pass's film and samples; bench.memory measured 2662-2791 B/px in all
+    # (2380-2570 beyond bsdf's), and 250 MB fixed (torch, the network)
+    pixel_bytes = 3300
     fixed_bytes = 384 << 20
     DEFAULTS = {"initial": 1, "k": "auto", "stride": 8, "alpha": 0.5, "weights": "odis", "batch": 128,
                 "maps": "network", "reference_per_bin": 16}

@@ -172,8 +172,8 @@ class PSSGuide(Guide):
     name = "pss"
     learns = False  # no vertex records: it learns from the candidate pass's samples
     # memory (tracer.memory): the candidate film and its samples' luminance; bench.memory measured
-    # 509 B/px in all (229 beyond bsdf's), and 400 MB fixed (torch, the examples)
-    pixel_bytes = 320
+    # 509-570 B/px in all (290-350 beyond bsdf's), and 400 MB fixed (torch, the examples)
+    pixel_bytes = 450
     fixed_bytes = 512 << 20
     DEFAULTS = {"condition": "pixel", "m": "auto", "layers": "auto", "width": "auto", "blocks": 1,
                 "defensive": 0.1, "target": "relative", "candidates": 8, "alpha": 6.0, "share": 0.3, "train_seconds": 20.0,
@@ -222,8 +222,12 @@ class PSSGuide(Guide):
         return _int(name, v, 1)
 
     def warm_up(self, ctx):
-        """Import torch and compile the camera kernels for external primary samples."""
-        import torch  # noqa: F401
+        """Import torch (and the optimiser's lazy imports: 1.4 s the first time, which would
+        otherwise come out of the learning share) and compile the camera kernels for external
+        primary samples."""
+        import torch
+
+        torch.optim.Adam([torch.zeros(1, requires_grad=True)])
 
         from ..integrator import trace_wave
         from ..sources import PrimarySampleSource
@@ -311,6 +315,7 @@ class PSSGuide(Guide):
         given, is asked after every batch: True ends the training (Ctrl-C)."""
         from . import pss_flow
 
+        end = _time.perf_counter() + seconds  # the examples' preparation counts too
         self._stats.update(condition=self.condition, target=self.target, defensive=self.defensive)
         if seconds <= 0.0 and self.epochs == 0:
             return "no time left to learn"
@@ -344,9 +349,15 @@ class PSSGuide(Guide):
                 b, const = pss_flow.prepare_targets(yp[:, warped_columns(self.condition, m)])
                 data[m][part] = (b, None if cp is None else torch.from_numpy(cp), float(const[:65536].mean()))
         runs = [_Fit(self, m, L, W, data[m], stop) for m, L, W in cands]
+        # half the time left (all with one candidate) trains the candidates, each a share of what
+        # is left of that half, less the last validation's time: a run's epoch always ends with
+        # one, so the learning ends near its deadline, not a validation per run past it
         share = 0.5 if len(runs) > 1 else 1.0
-        for r in runs:
-            r.train(seconds * share / len(runs), self.epochs)
+        phase_end = _time.perf_counter() + share * max(end - _time.perf_counter(), 0.0)
+        val_s = 0.0
+        for k, r in enumerate(runs):
+            r.train(max((phase_end - _time.perf_counter()) / (len(runs) - k) - val_s, 0.0), self.epochs)
+            val_s = r.val_seconds
         if not any(r.epochs_done for r in runs):
             return "no epoch fitted in the learning budget"
         finite = [r for r in runs if math.isfinite(r.best_nll)]
@@ -354,7 +365,7 @@ class PSSGuide(Guide):
             return "training diverged (validation NLL not finite)"
         best = min(finite, key=lambda r: r.best_nll)
         if len(runs) > 1:
-            best.train(seconds * (1.0 - share), self.epochs)
+            best.train(max(end - _time.perf_counter() - val_s, 0.0), self.epochs)
         best.restore()
         self.flow = best.flow
         self._stats.update(
@@ -412,6 +423,7 @@ class _Fit:
         self.epochs_done = 0
         self.gen = torch.Generator().manual_seed(1000 * m + 10 * layers + width)
         self.stop = stop if stop is not None else (lambda: False)
+        self.val_seconds = 0.0  # the last validation's time
 
     def _val(self, part="val"):
         b, c, const = self.data[part]
@@ -442,7 +454,9 @@ class _Fit:
                     break
             done += 1
             self.epochs_done += 1
+            tv = _time.perf_counter()
             v = self._val()
+            self.val_seconds = _time.perf_counter() - tv
             if math.isfinite(v) and v < self.best_nll:
                 self.best_nll = v
                 self.best_state = copy.deepcopy(self.flow.state_dict())
