@@ -22,17 +22,14 @@ run the smallest spp of every scene first, and a rerun skips the cells records.j
 all of them there, it rewrites the summary without rendering).
 """
 import argparse
-import json
 import os
-import platform
 
 import numpy as np
 
 import tracer
 from tracer import gradient, metrics
 
-from . import atomic
-from .convergence import reference_for, scene_path
+from .cells import run_cells
 from .reference import ROOT
 
 RECONS = {"gpt-l1": ("l1", None), "gpt-l2": ("l2", None), "gpt-gradnet": ("gradnet", {"correction": 1}),
@@ -125,32 +122,8 @@ def main(argv=None):
     p.add_argument("--weights", default="gradnet", help="GradNet weights name (tracer/weights)")
     p.add_argument("--out", default=os.path.join(ROOT, "bench", "results", "gradnet"))
     a = p.parse_args(argv)
-    os.makedirs(a.out, exist_ok=True)
-    path = os.path.join(a.out, "records.jsonl")
-    records = []
-    if os.path.exists(path):  # resume: keep what an earlier run of the same command finished
-        with open(path) as f:
-            records = [json.loads(line) for line in f if line.strip()]
-    meta = {"command": "python -m bench.gradnet " + " ".join(argv if argv is not None else __import__("sys").argv[1:]),
-            "machine": f"{platform.machine()}, {os.cpu_count()} cores", "seeds": a.seeds}
-    scenes = {}
-    for name in a.scenes.split(","):
-        obj = scene_path(name, a.scene_dir)
-        scenes[name] = (tracer.load_scene(obj), reference_for(obj)[0])
-    for spp in (int(s) for s in a.spp.split(",")):  # the smallest spp of every scene first
-        for name, (scene, ref) in scenes.items():
-            for seed in range(a.seeds):
-                if any(r["scene"] == name and r["spp"] == spp and r["seed"] == seed for r in records):
-                    continue
-                cell = [dict(r, scene=name) for r in run_cell(scene, seed, spp, ref, a.weights)]
-                records += cell
-                atomic.write_jsonl(path, records)
-                print(f"{name} spp {spp} seed {seed}: " + ", ".join(
-                    f"{r['method']} {r['metrics']['relMSE']:.4g}" for r in cell), flush=True)
-    text = summary(records, meta)
-    atomic.write_text(os.path.join(a.out, "summary.md"), text + "\n")
-    print(text)
-    return 0
+    return run_cells("bench.gradnet", argv, a, lambda scene, seed, spp, ref: run_cell(scene, seed, spp, ref, a.weights),
+                     lambda cell: ", ".join(f"{r['method']} {r['metrics']['relMSE']:.4g}" for r in cell), summary)
 
 
 if __name__ == "__main__":

@@ -17,9 +17,7 @@ Writes records.jsonl and summary.md to --out (default bench/results/recon_bias/)
 the cells records.jsonl holds.
 """
 import argparse
-import json
 import os
-import platform
 import time
 
 import numpy as np
@@ -28,8 +26,7 @@ import tracer
 from tracer import metrics
 from tracer.gradient import poisson
 
-from . import atomic
-from .convergence import reference_for, scene_path
+from .cells import run_cells
 from .reference import ROOT
 
 ALPHA = 0.2
@@ -105,32 +102,8 @@ def main(argv=None):
     p.add_argument("--seeds", type=int, default=2)
     p.add_argument("--out", default=os.path.join(ROOT, "bench", "results", "recon_bias"))
     a = p.parse_args(argv)
-    os.makedirs(a.out, exist_ok=True)
-    path = os.path.join(a.out, "records.jsonl")
-    records = []
-    if os.path.exists(path):
-        with open(path) as f:
-            records = [json.loads(line) for line in f if line.strip()]
-    meta = {"command": "python -m bench.recon_bias " + " ".join(argv if argv is not None else __import__("sys").argv[1:]),
-            "machine": f"{platform.machine()}, {os.cpu_count()} cores", "seeds": a.seeds}
-    scenes = {}
-    for name in a.scenes.split(","):
-        obj = scene_path(name, a.scene_dir)
-        scenes[name] = (tracer.load_scene(obj), reference_for(obj)[0])
-    for spp in (int(s) for s in a.spp.split(",")):
-        for name, (scene, ref) in scenes.items():
-            for seed in range(a.seeds):
-                if any(r["scene"] == name and r["spp"] == spp and r["seed"] == seed for r in records):
-                    continue
-                cell = [dict(r, scene=name) for r in run_cell(scene, seed, spp, ref)]
-                records += cell
-                atomic.write_jsonl(path, records)
-                print(f"{name} spp {spp} seed {seed}: " + ", ".join(
-                    f"{r['method']} mean/ref {r['mean_ref']:.3f}" for r in cell), flush=True)
-    text = summary(records, meta)
-    atomic.write_text(os.path.join(a.out, "summary.md"), text + "\n")
-    print(text)
-    return 0
+    return run_cells("bench.recon_bias", argv, a, run_cell,
+                     lambda cell: ", ".join(f"{r['method']} mean/ref {r['mean_ref']:.3f}" for r in cell), summary)
 
 
 if __name__ == "__main__":

@@ -24,3 +24,14 @@ def test_time_budget_is_kept(method):
     assert st["nonfinite_samples"] == 0 and not st["interrupted"]
     assert abs(st["time_total"] - BUDGET) <= 0.02 * BUDGET, (st["time_total"], st["passes"][-3:])
     assert st["spp"] >= 1 and st["spp_mean"] >= st["spp"]
+
+
+def test_a_budget_too_short_still_gives_every_pixel_two_samples():
+    """The deadline never cuts a final film before each pixel has 2 samples (a film with fewer gets
+    no weight when the passes are combined, a pixel with none is black): a budget shorter than
+    that overruns instead. gpt's base film gets at least one."""
+    scene = tracer.load_scene(CORNELL, width=96, height=96)
+    for kw, least in (({}, 2), ({"guide": "photon"}, 2), ({"integrator": "gpt"}, 1)):
+        r = tracer.render(scene, time=1e-3, **kw)
+        assert r.stats["spp"] >= least and r.film.count.min() >= least, (kw, r.stats["spp"])
+        assert r.stats["nonfinite_samples"] == 0

@@ -102,3 +102,20 @@ def test_black_image_is_reported(tmp_path, capsys, caplog):
     (tmp_path / "room.json").write_text(json.dumps(side))
     _, stats, err = render_cli(capsys, tmp_path, "lit", scene=obj, size=None, spp=2)
     assert "black" not in err and stats["lit_share"] > 0.9
+
+
+def test_many_emitters_and_a_z_up_sidecar(tmp_path):
+    """A room lit by an emissive sphere of 1280 triangles (more than the rays cast from the lights:
+    each ray must start on its own triangle), in a scene whose sidecar says only that +z is up: the
+    camera stands inside, its image up is +z, and it looks along a horizontal (x or y) axis."""
+    room_v, room_f = scenes.box_faces((-2, -2, 0), (2, 2, 3), inward=True)
+    ball_v, ball_f = scenes.icosphere(3)
+    assert len(ball_f) > 512
+    obj = scenes.write_scene(tmp_path, "zroom", [("wall", room_v, room_f), ("ball", 0.3 * ball_v + [0, 0, 2], ball_f)],
+                             {"wall": "Kd 0.7 0.7 0.7", "ball": "Kd 0 0 0\nKe 5 5 5"},
+                             {"camera": {"up": [0, 0, 1]}, "film": {"width": 12, "height": 12}})
+    scene = tracer.load_scene(obj)
+    o, f = scene.camera.origin, scene.camera.forward
+    assert np.all(o > [-2, -2, 0]) and np.all(o < [2, 2, 3]), scene.camera
+    assert abs(f[2]) < 1e-9 and scene.camera.up[2] > 0.99, scene.camera
+    assert lit(tracer.render(scene, spp=2).image) > 0.9

@@ -161,7 +161,7 @@ def _list_guides():
     from .guiding import REGISTRY, guide_settings
 
     for name, (factory, _) in REGISTRY.items():
-        doc = " ".join(line.strip() for line in (factory.__doc__ or "").strip().split("\n\n")[0].splitlines()) \
+        doc = " ".join(line.strip() for line in re.split(r"\n\s*\n", (factory.__doc__ or "").strip())[0].splitlines()) \
             if factory is not None else "BSDF importance sampling only (no guide)."
         doc = re.sub(r"^`--guide \w+`:\s*", "", doc)
         settings = guide_settings(name)
@@ -259,7 +259,14 @@ def _run(argv, warnings):
         raise TracerError("--recon-opt goes with --integrator gpt")
     else:
         recon_settings = None
-    scene = load_scene(args.scene, **overrides)
+    notice = [not args.quiet]  # once: before framing a scene without a camera, or before the render
+
+    def compile_notice():
+        if notice[0]:
+            _compile_notice(args.guide, args.accel)
+            notice[0] = False
+
+    scene = load_scene(args.scene, before_framing=compile_notice, **overrides)
     crop = _check_crop(crop, scene.width, scene.height) if crop is not None else None
     if ref is not None:
         if ref.shape[:2] != (scene.height, scene.width):
@@ -277,8 +284,7 @@ def _run(argv, warnings):
                  args.recon)
     _make_folder(out_dir, out)
     warnings.show_held()  # the input is good: show what loading it found
-    if not args.quiet:
-        _compile_notice(args.guide, args.accel)
+    compile_notice()
     result = render(scene, spp=args.spp, time=args.time, guide=args.guide, guide_settings=guide_settings,
                     max_depth=args.max_depth,
                     rr_depth=args.rr_depth, seed=args.seed, accel=args.accel, threads=args.threads,

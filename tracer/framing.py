@@ -16,8 +16,10 @@ these views and picks by how many of its pixels received light:
 An outside view shows the whole scene: one from the sides whose visible surfaces are mostly lit
 wins (the +z one unless another lights KEEP_DEFAULT times as many pixels, so a scene that framed
 well before keeps its view), else such a view from above or below; only when none is (a closed
-room seen from outside) does the most lit view win, usually one from inside. Image up is +y (the OBJ convention) except for the views
-along y. Returns the camera's (origin, target, up) and a one-line description of the view.
+room seen from outside) does the most lit view win, usually one from inside. Image up is the
+scene's up (+y, the OBJ convention, unless the sidecar gives camera.up), whose nearest coordinate
+axis decides which views are horizontal. Returns the camera's (origin, target, up) and a one-line
+description of the view.
 """
 import dataclasses
 import math
@@ -29,23 +31,41 @@ FRAME_SPP = 4
 FRAME_DEPTH = 8  # longest preview path (the scene's own limit when smaller)
 KEEP_DEFAULT = 1.25  # another view must light this many times the default's pixels to replace it
 LIGHT_RAYS = 512  # rays cast from the emitters to find the light's reach
-AXES = {"+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0), "+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0),
-        "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0)}
 
 
-def outside_view(bounds, fov, axis="+z"):
-    """(origin, target, up) on side `axis` of the bounding box, at the distance where a sphere
-    around the box fits the field of view `fov` (degrees), looking at the box's centre."""
+def view_axes(up=(0.0, 1.0, 0.0)):
+    """[(name, direction (3,), image up (3,))] of the six axis views: the four horizontal ones
+    first (+z, -z, +x, -x when `up` is +y, the default view first), then the two along the
+    coordinate axis nearest to `up`. A direction is the side the camera stands on; a horizontal
+    view's image up is `up`, a vertical one's the first horizontal axis."""
+    up = np.asarray(up, dtype=np.float64)
+    u = int(np.argmax(np.abs(up)))
+    sign = 1.0 if up[u] >= 0.0 else -1.0
+    horizontal = [a for a in (2, 0, 1) if a != u]
+    views = []
+    for a in horizontal:
+        for s_ in (1.0, -1.0):
+            d = np.zeros(3)
+            d[a] = s_
+            views.append((f"{'+' if s_ > 0 else '-'}{'xyz'[a]}", d, up))
+    for s_ in (1.0, -1.0):
+        d = np.zeros(3)
+        d[u] = s_ * sign
+        v_up = np.zeros(3)
+        v_up[horizontal[0]] = -s_
+        views.append((f"{'+' if s_ * sign > 0 else '-'}{'xyz'[u]}", d, v_up))
+    return views
+
+
+def outside_view(bounds, fov, d=(0.0, 0.0, 1.0)):
+    """(origin, target) on side `d` (a unit axis) of the bounding box, at the distance where a
+    sphere around the box fits the field of view `fov` (degrees), looking at the box's centre."""
     centre = 0.5 * (bounds[0] + bounds[1])
     extent = bounds[1] - bounds[0]
-    d = np.asarray(AXES[axis])
+    d = np.asarray(d, dtype=np.float64)
     dist = 0.5 * float(np.linalg.norm(extent)) / math.tan(math.radians(fov) / 2.0)
     origin = centre + d * (0.5 * float(np.abs(d) @ extent) + dist)
-    return origin, centre, _up(d)
-
-
-def _up(d):
-    return np.array([0.0, 0.0, -float(np.sign(d[1]))]) if abs(d[1]) > 0.5 else np.array([0.0, 1.0, 0.0])
+    return origin, centre
 
 
 def _light_reach(scene, accel, rng):
@@ -75,7 +95,7 @@ def _light_reach(scene, accel, rng):
     b2 = np.cross(n, b1)
     s, phi = np.sqrt(r1), 2.0 * np.pi * r2
     d = b1 * (s * np.cos(phi))[:, None] + b2 * (s * np.sin(phi))[:, None] + n * np.sqrt(1.0 - r1)[:, None]
-    org = p + n * ray_offsets(t, accel.centre)[pick, None]
+    org = p + n * ray_offsets(t, accel.centre)[:, None]
     dist, _, _, _ = accel.intersect(org, d)
     hit = np.isfinite(dist)
     if not hit.any():
@@ -86,17 +106,18 @@ def _light_reach(scene, accel, rng):
     return np.median(mids, axis=0), np.percentile(lit, [5.0, 95.0], axis=0)
 
 
-def _inside_views(anchor, reach, accel):
-    """(origin, target, up, name) backing away from `anchor` along each horizontal axis."""
+def _inside_views(anchor, reach, accel, axes):
+    """(origin, target, up, name) backing away from `anchor` along each horizontal axis of `axes`
+    (view_axes), looking through it."""
     views = []
     extent = reach[1] - reach[0]
-    for name in ("-z", "+z", "-x", "+x"):
-        d = np.asarray(AXES[name])  # the viewing direction
-        back, _, _, _ = accel.intersect(anchor[None], -d[None])
+    for name, side, up in axes[:4]:
+        d = -side  # the viewing direction
+        back, _, _, _ = accel.intersect(anchor[None], side[None])
         step = min(0.9 * float(back[0]), 0.5 * float(np.abs(d) @ extent))
         if not step > 0.0:
             continue
-        views.append((anchor - d * step, anchor + d, _up(d), f"inside, looking {name}"))
+        views.append((anchor - d * step, anchor + d, up, f"inside, looking {'-+'[name[0] == '-']}{name[1]}"))
     return views
 
 
@@ -107,9 +128,10 @@ def lit_share(image):
     return float((luminance(image) > 0.0).mean())
 
 
-def frame_camera(scene, fov, fov_axis="x"):
+def frame_camera(scene, fov, fov_axis="x", up=(0.0, 1.0, 0.0)):
     """((origin, target, up), description) of the view of `scene` (a Scene whose camera is
-    ignored) whose preview lights the most pixels; see the module docstring."""
+    ignored) whose preview lights the most pixels, `up` being the scene's up; see the module
+    docstring."""
     from .bvh import make_accel
     from .camera import Camera
     from .context import RenderContext
@@ -125,12 +147,13 @@ def frame_camera(scene, fov, fov_axis="x"):
         accel = make_accel("embree", scene.tri)
     except SettingsError:  # no embreex: the Numba BVH answers the same queries
         accel = make_accel("numba", scene.tri)
-    views = [(*outside_view(bounds, fov, name), f"outside, from {name}") for name in AXES]
+    axes = view_axes(up)
+    views = [(*outside_view(bounds, fov, d), v_up, f"outside, from {name}") for name, d, v_up in axes]
     reach = _light_reach(scene, accel, np.random.default_rng(0))
     anchors = [] if reach is None else [reach]
     anchors.append((0.5 * (bounds[0] + bounds[1]), bounds))
     for anchor, box in anchors:
-        views += _inside_views(anchor, box, accel)
+        views += _inside_views(anchor, box, accel, axes)
 
     aspect = scene.width / scene.height
     w = FRAME_SIZE if aspect >= 1.0 else max(1, round(FRAME_SIZE * aspect))

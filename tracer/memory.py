@@ -29,20 +29,36 @@ ACCEL_BYTES_PER_TRIANGLE = 512  # measured 416: Embree's BVH and float32 vertice
 HEADROOM = 0.9  # refuse a render that needs more than this share of the available memory
 
 
+def _read_int(path):
+    try:
+        with open(path, encoding="ascii") as f:
+            return int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
 def available_bytes():
     """Memory a new allocation can get without swapping: MemAvailable from /proc/meminfo (Linux),
-    else the physical memory (os.sysconf), else None (unknown: no check)."""
+    else the physical memory (os.sysconf), else None (unknown: no check); within a cgroup v2
+    memory limit (a container's), at most the limit less what the cgroup uses."""
+    have = None
     try:
         with open("/proc/meminfo", encoding="ascii") as f:
             for line in f:
                 if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
+                    have = int(line.split()[1]) * 1024
+                    break
     except OSError:
         pass
-    try:
-        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
-        return None
+    if have is None:
+        try:
+            have = int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+        except (ValueError, OSError, AttributeError):
+            return None
+    limit, used = _read_int("/sys/fs/cgroup/memory.max"), _read_int("/sys/fs/cgroup/memory.current")
+    if limit is not None and used is not None:  # ("max", no limit, reads as None)
+        have = min(have, max(limit - used, 0))
+    return have
 
 
 def estimate(pixels, triangles, wave_bytes, guide=None, integrator="path", recon="l2"):
@@ -74,5 +90,6 @@ def check(width, height, est, available=None):
     if have is None or need <= HEADROOM * have:
         return
     side = int(max(0.0, (HEADROOM * have - est["fixed"]) / est["per_pixel"]) ** 0.5)
+    fits = f"about {side}x{side} pixels would fit" if side > 0 else "not even the scene and the buffers fit"
     raise SettingsError(f"a {width}x{height} render needs about {_gib(need)} of memory ({est['per_pixel']} bytes a "
-                        f"pixel); this machine has {_gib(have)} available (about {side}x{side} pixels would fit)")
+                        f"pixel); this machine has {_gib(have)} available ({fits})")

@@ -27,7 +27,7 @@ import numpy as np
 from . import bsdfs
 from .camera import Camera
 from .errors import SceneError, SettingsError
-from .framing import frame_camera, outside_view
+from .framing import frame_camera, outside_view, view_axes
 from .objread import read_obj, triangle_areas
 
 log = logging.getLogger("tracer")
@@ -192,12 +192,13 @@ def _read_bytes(path, what):
 
 
 def _check_text(path, data, what):
-    """SceneError unless `data` (a file's bytes) looks like text: a NUL byte in its first 64 KiB
-    (and no UTF-16 byte-order mark) means a binary file, e.g. a binary PLY or FBX named .obj."""
+    """`data` (a file's bytes), or SceneError unless it looks like text: a NUL byte in its first
+    64 KiB (and no UTF-16 byte-order mark) means a binary file, e.g. a binary PLY or FBX named .obj."""
     head = data[:65536]
     nul = head.find(b"\x00")
     if nul >= 0 and not head.startswith((b"\xff\xfe", b"\xfe\xff")):
         raise SceneError(f"{path}: not a text {what} file (it holds binary data: a zero byte at offset {nul})")
+    return data
 
 
 def read_text(path, what):
@@ -431,10 +432,7 @@ def read_geometry(obj_path):
     OBJ: through the parallel reader (tracer.objread) when the file is made of the statements it
     reads, else checked line by line (errors name the line) and read by trimesh; both give the
     same triangles in the same order."""
-    data = _read_bytes(obj_path, "OBJ")
-    _check_text(obj_path, data, "OBJ")
-    fast = read_obj(data)  # (read_obj frees the bytes once parsed)
-    del data
+    fast = read_obj(_check_text(obj_path, _read_bytes(obj_path, "OBJ"), "OBJ"))  # (it frees the bytes once parsed)
     if fast is not None:
         return fast
     scan = scan_obj(obj_path)
@@ -442,10 +440,12 @@ def read_geometry(obj_path):
     return tri, groups, scan.mtllibs, scan.usemtl
 
 
-def load_scene(path, **overrides):
+def load_scene(path, before_framing=None, **overrides):
     """Load a scene; keyword overrides replace sidecar values (width, height, spp, ...).
 
-    Raises SceneError (one line, naming the file and the problem) for bad input.
+    Raises SceneError (one line, naming the file and the problem) for bad input. A scene without
+    a camera is framed (tracer.framing: tiny renders, which compile the kernels on first use);
+    before_framing(), if given, is called first (the command line's compile notice).
     """
     path = os.fspath(path)
     bad = sorted(set(overrides) - set(OVERRIDES))
@@ -565,14 +565,14 @@ def load_scene(path, **overrides):
         raise SceneError(f"{sidecar_path}: camera: fov must be in (0, 180) degrees, got {fov}")
     fov_axis = cam.get("fov_axis", "x")
     framed = not ({"origin", "target"} & set(cam))
+    up = _vec3(f"{sidecar_path}: camera.up", cam.get("up", [0.0, 1.0, 0.0]))
     if {"origin", "target"} <= set(cam):
         origin = _vec3(f"{sidecar_path}: camera.origin", cam["origin"])
         target = _vec3(f"{sidecar_path}: camera.target", cam["target"])
     elif not framed:
         raise SceneError(f"{sidecar_path}: camera needs both origin and target")
-    else:
-        origin, target, _ = outside_view(bounds, fov)
-    up = _vec3(f"{sidecar_path}: camera.up", cam.get("up", [0.0, 1.0, 0.0]))
+    else:  # the default view until framing (below) picks one
+        origin, target = outside_view(bounds, fov, view_axes(up)[0][1])
     camera = Camera.look_at(origin, target, up, fov, fov_axis, width, height, where=f"{sidecar_path}: camera")
 
     environment = _load_environment(sidecar.get("environment"), sidecar_path)
@@ -598,10 +598,9 @@ def load_scene(path, **overrides):
             f"{scene.path}: the scene has no light: no material with Ke > 0 and no environment in the sidecar{hint}"
         )
     if framed:
-        (origin, target, view_up), scene.framing = frame_camera(scene, fov, fov_axis)
-        forward = (target - origin) / np.linalg.norm(target - origin)
-        if "up" in cam and np.linalg.norm(np.cross(forward, up)) > 1e-6 * np.linalg.norm(up):
-            view_up = up  # the sidecar's up, unless the chosen view looks along it
+        if before_framing is not None:
+            before_framing()
+        (origin, target, view_up), scene.framing = frame_camera(scene, fov, fov_axis, up)
         scene.camera = Camera.look_at(origin, target, view_up, fov, fov_axis, width, height,
                                       where=f"{sidecar_path}: camera")
     return scene

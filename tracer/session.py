@@ -45,6 +45,7 @@ def trace_source(ctx, source, sink, spp=1, sample0=0, buf=None, stats=None, obse
 
 
 MIN_WAVE = 1024  # the shortest wave a time budget's end is cut to
+MIN_SWEEPS = 2  # samples every pixel of a film gets before its pass may be cut at the deadline
 
 
 class Stop(Exception):
@@ -86,14 +87,17 @@ class Session:
         """Seconds of the budget left for passes (the reserve kept back); inf without a time budget."""
         return float("inf") if self.time is None else self.time - self.reserve - self.elapsed()
 
-    def wave_limit(self, n):
+    def wave_limit(self, n, film=None, sweeps=MIN_SWEEPS):
         """How many of the next wave's n paths fit in the time left, at the seconds per path of the
         waves so far (this pass's, else the last pass's): n, fewer (at least MIN_WAVE), or 0 to end
-        the pass. The last waves of a time budget end it within a wave of MIN_WAVE paths."""
+        the pass. The last waves of a time budget end it within a wave of MIN_WAVE paths. `film`,
+        if given, is never cut before each of its pixels has `sweeps` samples (a film with fewer
+        gets no weight in combine_films; a pixel with none would be black): the budget is then
+        overrun by what those take."""
         if self._rate is None or self.time is None:
             return n
-        fit = int(self.time_left() / self._rate)
-        if fit >= n:
+        fit = int(self.time_left() / max(self._rate, 1e-12))
+        if fit >= n or (film is not None and film.count.min() < sweeps):
             return n
         return fit if fit >= MIN_WAVE else 0
 
@@ -130,7 +134,7 @@ class Session:
         observe = g.observe if learn else None
         direct = g.learn_direct if g is not None else True
         self._pass_paths, self._pass_seconds = 0, 0.0
-        limit = self.wave_limit if deadline and self.time is not None else None
+        limit = (lambda n: self.wave_limit(n, film)) if deadline and self.time is not None else None
         trace_source(ctx, source, film, spp, self.sample0, buf, self.stats, observe, direct, split, self._before_wave,
                      self._after_wave, limit)
         total = source.count(ctx, spp)
@@ -186,8 +190,8 @@ class Session:
                 pass_spp = min(pass_spp, self.spp - self.sample0)
             else:
                 left = self.time_left()
-                if self.out_of_time or left <= 0.0:
-                    break
+                if self.out_of_time or (left <= 0.0 and self.final.count.min() >= MIN_SWEEPS):
+                    break  # (a final film gets its MIN_SWEEPS whatever the budget: see wave_limit)
                 if passes[first_final:]:
                     ref = passes[first_final:]
                     per_spp = sum(p["time"] for p in ref) / sum(p.get("paths", p["spp"] * self.ctx.n_pixels)

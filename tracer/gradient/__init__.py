@@ -87,8 +87,6 @@ def solve_time_estimate(recon, width, height, alpha, opts=None):
     if recon == "none":
         return 0.0
     if recon == "gradnet":
-        from . import gradnet
-
         s = recon_settings(recon, opts)
         z = np.zeros((128, 128, 3), np.float32)
         b = dict(indirect=z, dx=z, dy=z, direct=z, albedo=z, normal=z, depth=z[..., :1])
@@ -107,7 +105,9 @@ def solve_time_estimate(recon, width, height, alpha, opts=None):
         t0 = _time.perf_counter()
         poisson.reconstruct(recon, b, gx, gy, alpha)
         times.append(_time.perf_counter() - t0)
-    per_pixel = max(times[1] - times[0], 0.0) / (128 * 128 - 64 * 64)
+    # (at least half the 128 x 128 solve's time per pixel: timing noise must not make a large
+    # image's solve look as cheap as a small one's)
+    per_pixel = max((times[1] - times[0]) / (128 * 128 - 64 * 64), 0.5 * times[1] / (128 * 128))
     return max(times[0] + per_pixel * (width * height - 64 * 64), 0.0)
 
 

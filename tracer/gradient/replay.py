@@ -94,8 +94,9 @@ def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, time_le
                     before_wave=None, after_wave=None, shift="replay", roughness=0.001, after_pass=None):
     """Render passes of 1, 2, 4, ... spp into `films` (GradientFilms) until `spp` in all, or, with
     a time budget (`time`), while time_left() (seconds) holds more: each pass at most what the time
-    left holds at the speed so far (rounded up), its waves cut by limit(n) (session.wave_limit: the
-    last sweep of the last pass partial); appends {spp, time, kind} (and partial, paths, sweeps)
+    left holds at the speed so far (rounded up), its waves cut by limit(n, film, sweeps)
+    (session.wave_limit, never before every pixel of the base film has a sample: the last sweep
+    of the last pass partial); appends {spp, time, kind} (and partial, paths, sweeps)
     to `passes` after each. before_wave(n) and after_wave(n) are called around each wave of n base
     paths (before_wave may raise to stop: the films keep every finished wave). shift: "replay"
     (here) or "hybrid" (hybrid.py, reconnecting above `roughness`). after_pass(film) is called
@@ -120,8 +121,8 @@ def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, time_le
             pass_spp = min(pass_spp, spp - done)
         else:
             left = time_left()
-            if left <= 0.0 or (passes and passes[-1].get("partial")):
-                break
+            if (left <= 0.0 and films.base.count.min() >= 1) or (passes and passes[-1].get("partial")):
+                break  # (every pixel gets a sample whatever the budget)
             if passes:
                 per_spp = sum(p["time"] for p in passes) / sum(p.get("paths", p["spp"] * npix) / npix for p in passes)
                 pass_spp = max(1, min(pass_spp, math.ceil(left / per_spp)))
@@ -131,7 +132,7 @@ def gradient_passes(ctx, buf, stats, films, passes, spp=None, time=None, time_le
         while g0 < total:
             m = min(buf.size, total - g0)
             if limit is not None and time is not None:
-                m = min(m, limit(m))
+                m = min(m, limit(m, films.base, 1))
                 if m <= 0:
                     break
             if before_wave is not None:

@@ -351,9 +351,7 @@ class OdisGuide(Guide):
                 ctx.max_depth = saved
             reason = self._stats.get("fallback")
         self._stats["fallback"] = reason
-        session.final_passes()
-        if session.final.count.max() == 0:  # the initial pass took the whole --time budget
-            session.run_pass(session.final, 1, "final")
+        session.final_passes()  # (at least 2 spp, even when the initial pass took the whole budget)
 
     def observe(self, rec):
         """The first hits of one wave of the initial pass (copied: the buffer is reused)."""
