@@ -76,6 +76,7 @@ class Session:
         self.out_of_time = False  # a pass was cut short at the end of the budget
         self._wave_t0 = 0.0
         self._rate = None  # seconds per path of the latest pass that traced a wave
+        self._last_rate = 0.0  # and of its last wave
         self._pass_paths = 0
         self._pass_seconds = 0.0
 
@@ -89,16 +90,19 @@ class Session:
 
     def wave_limit(self, n, film=None, sweeps=MIN_SWEEPS):
         """How many of the next wave's n paths fit in the time left, at the seconds per path of the
-        waves so far (this pass's, else the last pass's): n, fewer (at least MIN_WAVE), or 0 to end
-        the pass. The last waves of a time budget end it within a wave of MIN_WAVE paths. `film`,
+        waves so far (this pass's, else the last pass's, or the last wave's if slower): n, or, when
+        not all fit, those that fit in half the time left (at least MIN_WAVE), or 0 to end the pass.
+        The waves shrink toward the deadline, so the budget ends within a wave of MIN_WAVE paths
+        even when a wave runs up to twice as slow as measured. `film`,
         if given, is never cut before each of its pixels has `sweeps` samples (a film with fewer
         gets no weight in combine_films; a pixel with none would be black): the budget is then
         overrun by what those take."""
         if self._rate is None or self.time is None:
             return n
-        fit = int(self.time_left() / max(self._rate, 1e-12))
+        fit = int(self.time_left() / max(self._rate, self._last_rate, 1e-12))
         if fit >= n or (film is not None and film.count.min() < sweeps):
             return n
+        fit //= 2  # half the time left: a wave twice as slow as the last (a busy machine) still ends in time
         return fit if fit >= MIN_WAVE else 0
 
     def new_film(self, kind):
@@ -165,9 +169,11 @@ class Session:
         self._wave_t0 = _time.perf_counter()
 
     def _after_wave(self, n):
+        seconds = _time.perf_counter() - self._wave_t0
         self._pass_paths += n
-        self._pass_seconds += _time.perf_counter() - self._wave_t0
+        self._pass_seconds += seconds
         self._rate = self._pass_seconds / self._pass_paths
+        self._last_rate = seconds / n
         if self.bar is not None:
             self.bar.update(n / self.ctx.n_pixels)
 
