@@ -3,14 +3,14 @@
     python -m bench.identical --save /tmp/ident-before     # on the old code
     python -m bench.identical --check /tmp/ident-before    # on the new code: exit 1 on any difference
 
-Cases: `bsdf`, `grid` and `photon` on the built-in `cornell` and `ajar`, full resolution, fixed
-seeds, 16 spp (so that the guides run their pilot, training passes and a final pass with
-splitting and the weight window), on the Embree accel and, for `bsdf` on cornell, the Numba BVH.
-Saved per case: image, variance and AOVs (an .npz), plus SHA-256 digests of their bytes. A
-difference is reported per case with the number of differing pixels and the largest difference.
+Cases: `bsdf`, `grid`, `photon`, `pss` (2 epochs per model: deterministic), `odis` and
+gradient-domain path tracing with `l1` and `l2` on the built-in `cornell` and `ajar`, full
+resolution, fixed seeds, 16 spp (so that the guides run their pilot, training passes and a final
+pass with splitting and the weight window), on the Embree accel and, for `bsdf` on cornell, the
+Numba BVH. Saved per case: image, variance and AOVs (an .npz). A difference is reported per case
+with the number of differing pixels and the largest difference. `--cases` picks cases by name.
 """
 import argparse
-import hashlib
 import os
 import sys
 
@@ -21,19 +21,18 @@ import tracer
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = {"cornell": os.path.join(ROOT, "scenes", "cornell", "cornell.obj"),
           "ajar": os.path.join(ROOT, "scenes", "ajar", "ajar.obj")}
-CASES = [(s, g, "embree") for s in SCENES for g in ("bsdf", "grid", "photon")] + [("cornell", "bsdf", "numba")]
+METHODS = {"bsdf": {}, "grid": {"guide": "grid"}, "photon": {"guide": "photon"},
+           "pss": {"guide": "pss", "guide_settings": {"epochs": 2}}, "odis": {"guide": "odis"},
+           "gpt-l1": {"integrator": "gpt", "recon": "l1"}, "gpt-l2": {"integrator": "gpt", "recon": "l2"}}
+CASES = [(s, g, "embree") for s in SCENES for g in METHODS] + [("cornell", "bsdf", "numba")]
 
 
-def render_case(scene_name, guide, accel, spp, seed):
+def render_case(scene_name, method, accel, spp, seed):
     scene = tracer.load_scene(SCENES[scene_name])
-    r = tracer.render(scene, spp=spp, guide=guide, accel=accel, seed=seed, max_depth=8)
+    r = tracer.render(scene, spp=spp, accel=accel, seed=seed, max_depth=8, **METHODS[method])
     out = {"image": r.image, "variance": r.variance}
     out.update({f"aov_{k}": v for k, v in r.aovs.items()})
     return out, r.stats
-
-
-def digest(arrays):
-    return {k: hashlib.sha256(np.ascontiguousarray(v).tobytes()).hexdigest() for k, v in sorted(arrays.items())}
 
 
 def main(argv=None):
@@ -43,11 +42,13 @@ def main(argv=None):
     mode.add_argument("--check", metavar="DIR", help="render the cases and compare with DIR")
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--cases", help="comma-separated case names (scene-method-accel), default all")
     args = ap.parse_args(argv)
     folder = args.save or args.check
     os.makedirs(folder, exist_ok=True)
     failed = 0
-    for scene_name, guide, accel in CASES:
+    cases = [c for c in CASES if args.cases is None or "-".join(c) in args.cases.split(",")]
+    for scene_name, guide, accel in cases:
         name = f"{scene_name}-{guide}-{accel}"
         arrays, stats = render_case(scene_name, guide, accel, args.spp, args.seed)
         path = os.path.join(folder, name + ".npz")
@@ -71,7 +72,7 @@ def main(argv=None):
         else:
             print(f"{name}: identical ({stats['time_total']:.1f} s)")
     if args.check:
-        print("all identical" if not failed else f"{failed} of {len(CASES)} cases differ")
+        print("all identical" if not failed else f"{failed} of {len(cases)} cases differ")
     return 1 if failed else 0
 
 
