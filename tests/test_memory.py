@@ -77,7 +77,7 @@ def test_estimate_bounds_the_allocations(method, kw, tmp_path):
     g = None if gpt else make_guide(method, **kw.get("guide_settings", {}))
     wave_bytes = WaveBuffers.bytes_for(wave, split=g is not None and g.splits)
     if gpt:
-        from tracer.gradient.hybrid import HybridBuffers
+        from tracer.gradient.offsets import HybridBuffers
 
         wave_bytes += HybridBuffers.bytes_for(wave)
     est = memory.estimate(w * h, 0, wave_bytes, g, "gpt" if gpt else "path", method[4:] if gpt else "l2")

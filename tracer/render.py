@@ -151,7 +151,7 @@ def check_memory(scene, crop, wave_size, spp, guide, integrator="path", shift="h
     wave = min(wave_size, npix * (spp if spp is not None else 1024))
     wave_bytes = WaveBuffers.bytes_for(wave, split=guide is not None and guide.splits)
     if integrator == "gpt" and shift == "hybrid":
-        from .gradient.hybrid import HybridBuffers
+        from .gradient.offsets import HybridBuffers
 
         wave_bytes += HybridBuffers.bytes_for(wave)
     try:

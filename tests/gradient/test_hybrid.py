@@ -6,7 +6,7 @@ import pytest
 from scipy import stats as sstats
 
 from tracer import bsdfs
-from tracer.gradient.hybrid import half_vector_shift, reconnection
+from tracer.gradient.shift import half_vector_shift, reconnection
 from tests.gradient.zscores import gradient_z
 from tests.stats import z_critical
 

@@ -11,7 +11,8 @@ import numpy as np
 
 from ..errors import SettingsError, unknown_name
 from . import poisson
-from .replay import GradientFilms, gradient_passes  # noqa: F401
+from .films import GradientFilms  # noqa: F401
+from .passes import gradient_passes  # noqa: F401
 
 SHIFTS = ("hybrid", "replay")
 ROUGHNESS = 0.001  # the hybrid shift reconnects between vertices rougher than this

@@ -1,0 +1,298 @@
+"""Shading of a base path and its four offsets at one bounce of the hybrid shift (shade_hybrid):
+emission and next-event estimation weighted over the four techniques of each pixel pair, the
+base's next direction; add_next_event adds the NEE terms once the shadow rays are known. The
+weights are derived in hybrid.py's docstring."""
+
+import math
+
+from numba import prange
+
+from .. import bsdfs
+from .._jit import jit, kernel
+from ..integrator import MAX_BOUNCES
+from ..lights import ENV_NONE, env_pdf, env_radiance, triangle_emission, triangle_light_pdf
+from ..rng import DIR, LIGHT, LIGHT_POS, LOBE, RR, bounce_dim, draw
+from ..sampling import dot, frame, to_local, triangle_point
+from ..shading import emitted_env, emitted_surface, light_sample_at, offset_point, russian_roulette, sample_mixture
+from ..shading import shadow_ray, write_aovs, write_shadow
+from .offsets import BLOCKED, CONNECTED, TRACED
+from .shift import is_rough, reconnection
+
+
+@jit(inline="always")
+def _emitted_by(lt, tri_normal, q, wo, dist2, delta):
+    """(radiance, light density) of what an offset's vertex emits toward its previous vertex: triangle
+    q (-1: the environment along -wo), wo the unit direction back, dist2 the squared segment length;
+    the light density is NEE's density of the same point (0 after a delta lobe)."""
+    if q < 0:
+        if lt.env_type == ENV_NONE:
+            return (0.0, 0.0, 0.0), 0.0
+        w = (-wo[0], -wo[1], -wo[2])
+        return env_radiance(lt, w), 0.0 if delta else env_pdf(lt, w)
+    if lt.light_of_tri[q] < 0:
+        return (0.0, 0.0, 0.0), 0.0
+    cos_o = wo[0] * tri_normal[q, 0] + wo[1] * tri_normal[q, 1] + wo[2] * tri_normal[q, 2]
+    return triangle_emission(lt, q, cos_o), 0.0 if delta else triangle_light_pdf(lt, q, dist2, cos_o)
+
+
+@kernel
+def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, lt, gs,
+                 ps, max_depth, rr_depth, roughness,
+                 beta, L, L_cam, depth, prev_pdf, prev_delta, key, aov, aov_open,
+                 alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
+                 b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough, G,
+                 o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights,
+                 o_trace, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o, o_sh_d, o_sh_tmax,
+                 n_cn, n_pl, n_pb, n_mode, n_co, n_rj, n_plo, n_pbo, vis):
+    """One bounce of base and offset paths: the vertices the offsets reached, emission (the base's
+    as the path tracer's, the gradients' with the pair weights), NEE shifted to the offsets, the
+    base's direction and roulette. Entry k is path active[k]; the offsets' hits of traced rays are in
+    hit_* (where o_trace). Shadow rays: the base's (has_shadow, sh_*: sh_L its value for L) and the
+    offsets' own (o_sh, o_sh_*); the NEE terms n_* are weighted by add_next_event once they are
+    traced."""
+    for k in prange(active.shape[0]):
+        i = active[k]
+        alive[k] = False
+        has_shadow[k] = False
+        dk = depth[i]
+        wray = (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2])
+        b = (beta[i, 0], beta[i, 1], beta[i, 2])
+        p = prim[k]
+        for o in range(4):
+            o_sh[i, o] = False
+            vis[i, o] = False
+            n_mode[i, o] = 0
+        if dk == 0:
+            for c in range(3):
+                L_cam[i, c] = 0.0
+        x = (0.0, 0.0, 0.0)
+        ng = (0.0, 0.0, 1.0)
+        if p >= 0:
+            x = triangle_point(tri, p, b1[k], b2[k])
+            ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])
+
+        # Where the offsets are now
+        for o in range(4):
+            if not o_alive[i, o]:
+                continue
+            st = o_status[i, o]
+            if st == CONNECTED:
+                o_prim[i, o] = p
+                o_dist2[i, o] = t[k] * t[k]
+                for c in range(3):
+                    o_x[i, o, c] = x[c]
+                    o_wo[i, o, c] = -wray[c]
+            elif st == TRACED and o_trace[i, o]:
+                q = hit_prim[i, o]
+                o_prim[i, o] = q
+                o_dist2[i, o] = hit_t[i, o] * hit_t[i, o]
+                if q >= 0:
+                    y = triangle_point(tri, q, hit_b1[i, o], hit_b2[i, o])
+                    for c in range(3):
+                        o_x[i, o, c] = y[c]
+                # The reverse of a half-vector copy would reconnect here: not a bijection, fail
+                if o_hv[i, o] and (q < 0 or is_rough(mat_type, mat_param, tri_material[q], roughness)):
+                    o_alive[i, o] = False
+
+        # Emission: the base's (the path tracer's, MIS against NEE), and each pair's gradient
+        le = (0.0, 0.0, 0.0)
+        w = 1.0
+        pl = 0.0
+        if p < 0:
+            if lt.env_type != ENV_NONE:
+                le, w = emitted_env(lt, wray, dk, prev_pdf[i], prev_delta[i])
+                if dk > 0 and not prev_delta[i]:
+                    pl = env_pdf(lt, wray)
+        elif lt.light_of_tri[p] >= 0:
+            le, w = emitted_surface(lt, p, t[k] * t[k], -dot(wray, ng), dk, prev_pdf[i], prev_delta[i])
+            if dk > 0 and not prev_delta[i]:
+                pl = triangle_light_pdf(lt, p, t[k] * t[k], -dot(wray, ng))
+        cb = (b[0] * le[0], b[1] * le[1], b[2] * le[2])
+        for c in range(3):
+            L[i, c] += cb[c] * w
+            if dk == 0:
+                L_cam[i, c] = cb[c] * w
+        if dk > 0:
+            rb = pl / prev_pdf[i]
+            for o in range(4):
+                if not o_alive[i, o]:  # the base's techniques alone: the path tracer's weight (BSDF's
+                    wd = w if o_lights[i, o] else 1.0  # alone after a failed half-vector copy)
+                    for c in range(3):
+                        G[i, o, c] -= cb[c] * wd
+                    continue
+                leo, plo = _emitted_by(lt, tri_normal, o_prim[i, o], (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]),
+                                       o_dist2[i, o], o_delta[i, o])
+                ro = plo / o_pdf[i, o]
+                R2 = o_R[i, o] * o_R[i, o]
+                if o_status[i, o] == BLOCKED:  # no BSDF sample reaches x through the occluder: no light
+                    den = 1.0 + rb * rb + R2 * ro * ro
+                    leo = (0.0, 0.0, 0.0)
+                elif o_lights[i, o]:
+                    den = 1.0 + rb * rb + R2 * (1.0 + ro * ro)
+                else:
+                    den = 1.0 + R2
+                for c in range(3):
+                    G[i, o, c] += (o_beta[i, o, c] * leo[c] - cb[c]) / den
+        for o in range(4):  # an offset that escaped, or was blocked, ends here
+            if o_alive[i, o] and (o_prim[i, o] < 0 or o_status[i, o] == BLOCKED):
+                o_alive[i, o] = False
+        if p < 0:
+            continue
+
+        m = tri_material[p]
+        delta = write_aovs(mat_type, mat_param, m, i, dk, -dot(wray, ng), ng, t[k], aov, aov_open)
+        if max_depth >= 0 and dk + 1 >= max_depth:
+            continue
+        s, tt = frame(ng)
+        wo = to_local((-wray[0], -wray[1], -wray[2]), s, tt, ng)
+        kk = key[i]
+        rough = is_rough(mat_type, mat_param, m, roughness)
+        for o in range(4):
+            if o_alive[i, o]:
+                if o_status[i, o] == TRACED:
+                    o_rough[i, o] = is_rough(mat_type, mat_param, tri_material[o_prim[i, o]], roughness)
+                else:
+                    o_rough[i, o] = rough
+
+        # NEE: the base's sample (the path tracer's), shifted to each offset
+        if not delta:
+            ok, so, sd, tmax, contrib, wl, dist, lel, pll, lt_tri, fb, pbb = light_sample_at(
+                mat_type, mat_param, m, lt, tri, x, ng, s, tt, wo, b, gs, -1, 1.0, tri_eps[p], tri_eps,
+                draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
+                draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)))
+            valid = pll > 0.0 and (lel[0] > 0.0 or lel[1] > 0.0 or lel[2] > 0.0)
+            if valid and not ok:  # no value, but its visibility enters the pairs' weights
+                so, sd, tmax = shadow_ray(x, ng, tri_eps[p], wl, dist, lt, lt_tri, tri_eps)
+                ok = tmax > 0.0
+                contrib = (0.0, 0.0, 0.0)
+            if ok:
+                write_shadow(k, so, sd, tmax, contrib, sh_o, sh_d, sh_tmax, sh_L, has_shadow)
+            if valid:
+                n_pl[i] = pll
+                n_pb[i] = pbb
+                for c in range(3):
+                    n_cn[i, c] = b[c] * fb[c] * lel[c] / pll
+                zl = (x[0] + dist * wl[0], x[1] + dist * wl[1], x[2] + dist * wl[2])
+                rough_z = lt_tri < 0 or is_rough(mat_type, mat_param, tri_material[lt_tri], roughness)
+                for o in range(4):
+                    if not o_alive[i, o]:
+                        n_mode[i, o] = 1
+                        continue
+                    st = o_status[i, o]
+                    if st == TRACED and not (rough and o_rough[i, o] and rough_z):
+                        # The pair's BSDF sample would be copied, not reconnected: no NEE for it (NEE
+                        # reconnects, and both techniques must map a path to the same partner). An
+                        # offset at a delta vertex has no partner either way: the base's two techniques.
+                        if bsdfs.bsdf_is_delta(mat_type, mat_param, tri_material[o_prim[i, o]]):
+                            n_mode[i, o] = 1
+                        continue
+                    y = x
+                    ngy = ng
+                    sy = s
+                    ty = tt
+                    py = p
+                    if st == TRACED:
+                        py = o_prim[i, o]
+                        y = (o_x[i, o, 0], o_x[i, o, 1], o_x[i, o, 2])
+                        ngy = (tri_normal[py, 0], tri_normal[py, 1], tri_normal[py, 2])
+                        sy, ty = frame(ngy)
+                    my = tri_material[py]
+                    wo_o = to_local((o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]), sy, ty, ngy)
+                    wlo = wl
+                    disto = dist
+                    jl = 1.0
+                    leo = lel
+                    plo = pll
+                    if st == TRACED and lt_tri >= 0:
+                        li = lt.light_of_tri[lt_tri]
+                        nl = (lt.normal[li, 0], lt.normal[li, 1], lt.normal[li, 2])
+                        wlo, disto, jl = reconnection(x, y, zl, nl)
+                        if not jl > 0.0:  # no partner path: the base's techniques alone
+                            n_mode[i, o] = 1
+                            continue
+                        cos_l = -dot(wlo, nl)
+                        leo = triangle_emission(lt, lt_tri, cos_l)
+                        plo = triangle_light_pdf(lt, lt_tri, disto * disto, cos_l)
+                    wil = to_local(wlo, sy, ty, ngy)
+                    fo = bsdfs.bsdf_eval(mat_type, mat_param, my, wo_o, wil, True)
+                    n_pbo[i, o] = bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wil)
+                    n_plo[i, o] = plo
+                    n_rj[i, o] = o_R[i, o] * jl
+                    for c in range(3):
+                        n_co[i, o, c] = o_beta[i, o, c] * jl * fo[c] * leo[c] / pll
+                    if st != TRACED:  # at the base's vertex: the base's shadow ray
+                        n_mode[i, o] = 2
+                        continue
+                    n_mode[i, o] = 3
+                    oo, od, otmax = shadow_ray(y, ngy, tri_eps[py], wlo, disto, lt, lt_tri, tri_eps)
+                    if otmax > 0.0:
+                        o_sh[i, o] = True
+                        o_sh_tmax[i, o] = otmax
+                        for c in range(3):
+                            o_sh_o[i, o, c] = oo[c]
+                            o_sh_d[i, o, c] = od[c]
+
+        # The base's next direction (the path tracer's) and roulette
+        wiw, wt, pdf, _, dlt, _, _ = sample_mixture(
+            mat_type, mat_param, m, gs, -1, 1.0, wo, s, tt, ng, draw(ps, kk, i, bounce_dim(dk, DIR)),
+            draw(ps, kk, i, bounce_dim(dk, DIR + 1)), draw(ps, kk, i, bounce_dim(dk, LOBE)), 1.0)
+        nb = (b[0] * wt[0], b[1] * wt[1], b[2] * wt[2])
+        bmax = max(nb[0], max(nb[1], nb[2]))
+        go = bmax > 0.0 and math.isfinite(bmax)
+        q = 1.0
+        if go and dk + 1 >= rr_depth:
+            go, nb, q = russian_roulette(nb, 1.0, draw(ps, kk, i, bounce_dim(dk, RR)))
+        if dk + 1 >= MAX_BOUNCES:
+            go = False
+        if not go:
+            continue
+        no = offset_point(x, ng, wiw, tri_eps[p])
+        for c in range(3):
+            beta[i, c] = nb[c]
+            next_o[k, c] = no[c]
+            next_d[k, c] = wiw[c]
+            b_x[i, c] = x[c]
+            b_wo[i, c] = -wray[c]
+            b_wt[i, c] = wt[c]
+        for o in range(4):
+            for c in range(3):
+                o_beta[i, o, c] /= q
+        b_prim[i] = p
+        b_pdf[i] = pdf
+        b_delta[i] = dlt
+        b_rough[i] = rough and not dlt
+        depth[i] = dk + 1
+        prev_pdf[i] = pdf
+        prev_delta[i] = dlt
+        alive[k] = True
+
+
+@kernel
+def add_next_event(active, has_shadow, vis_b, sh_L, L, G, n_mode, n_cn, n_pl, n_pb, n_co, n_rj, n_plo, n_pbo, vis):
+    """Add the bounce's NEE once its shadow rays are traced: the base's value to L, and to each pair's
+    gradient w (vis_o C_o - vis_b C_b), w = pL^2 / (pL^2 + pB^2 + (R J_L)^2 (pL_o^2 + pB_o^2)), where a
+    blocked side's BSDF density is 0 (a BSDF sample cannot reach the light through the occluder).
+    Mode 1 (no partner): minus the base's own weighted value."""
+    for k in prange(active.shape[0]):
+        i = active[k]
+        vb = has_shadow[k] and vis_b[k]
+        if vb:
+            for c in range(3):
+                L[i, c] += sh_L[k, c]
+        for o in range(4):
+            mode = n_mode[i, o]
+            if mode == 0:
+                continue
+            if mode == 1:
+                if vb:
+                    for c in range(3):
+                        G[i, o, c] -= sh_L[k, c]
+                continue
+            vo = vb if mode == 2 else vis[i, o]
+            pl = n_pl[i]
+            pb = n_pb[i] if vb else 0.0
+            po = n_pbo[i, o] if vo else 0.0
+            rj = n_rj[i, o]
+            wg = pl * pl / (pl * pl + pb * pb + rj * rj * (n_plo[i, o] * n_plo[i, o] + po * po))
+            for c in range(3):
+                G[i, o, c] += wg * ((n_co[i, o, c] if vo else 0.0) - (n_cn[i, c] if vb else 0.0))

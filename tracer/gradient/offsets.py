@@ -1,0 +1,240 @@
+"""The hybrid shift's offset paths: their state (HybridBuffers, four offsets per base path, with a
+status TRACED, RECENT, CONNECTED or BLOCKED), their camera rays (start_offsets) and their step at
+each of the base's hits (shift_offsets: reconnect, or copy the half vector, shift.py)."""
+
+import math
+
+import numpy as np
+from numba import prange
+
+from .. import bsdfs
+from .._jit import jit, kernel
+from ..camera import camera_ray
+from ..rng import DIM_PIXEL, draw
+from ..sampling import dot, frame, to_local, to_world, triangle_point
+from ..shading import offset_point
+from .shift import is_rough, half_vector_shift, reconnection
+
+
+# offset status: own vertex; reconnected one bounce ago; the base's vertices; reconnected through an
+# occluder (a failed shift that still enters the weights of the emission at the base's vertex)
+TRACED, RECENT, CONNECTED, BLOCKED = 0, 1, 2, 3
+
+
+class HybridBuffers:
+    """The offset paths' state for a wave of `size` base paths (4 offsets each, in the order of
+    replay.OFFSETS), and the base's last bounce, which the shift copies."""
+
+    def __init__(self, size):
+        z = lambda *s, d=np.float64: np.zeros((size,) + s, d)  # noqa: E731
+        self.b_x, self.b_wo, self.b_wt = z(3), z(3), z(3)
+        self.b_prim = z(d=np.int64)
+        self.b_pdf = z()
+        self.b_delta, self.b_rough = z(d=np.bool_), z(d=np.bool_)
+        # NEE terms, weighted once the shadow rays are known: the base's value, light and BSDF
+        # densities; per offset a mode (0 no term, 1 the base alone, 2 the base's shadow ray,
+        # 3 its own), value, R J_L, light and BSDF densities, and the visibility of its own ray
+        self.n_cn, self.n_pl, self.n_pb, self.vis_b = z(3), z(), z(), z(d=np.bool_)
+        self.n_mode = z(4, d=np.int8)
+        self.n_co, self.n_rj, self.n_plo, self.n_pbo, self.vis = z(4, 3), z(4), z(4), z(4), z(4, d=np.bool_)
+        self.G = z(4, 3)  # per path and offset: the weighted gradient I(p + e) - I(p) found so far
+        self.alive, self.rough, self.hv = z(4, d=np.bool_), z(4, d=np.bool_), z(4, d=np.bool_)
+        self.lights = z(4, d=np.bool_)  # the pair's last bounce counts the light techniques (not a copy)
+        self.trace, self.reconn, self.sh = z(4, d=np.bool_), z(4, d=np.bool_), z(4, d=np.bool_)
+        self.status, self.prim = z(4, d=np.int8), z(4, d=np.int64)
+        self.beta, self.x, self.wo = z(4, 3), z(4, 3), z(4, 3)
+        self.R, self.pdf, self.dist2 = z(4), z(4), z(4)
+        self.delta = z(4, d=np.bool_)
+        self.ray_o, self.ray_d, self.tmax = z(4, 3), z(4, 3), z(4)
+        self.hit_t, self.hit_b1, self.hit_b2 = z(4), z(4), z(4)
+        self.hit_prim = z(4, d=np.int64)
+        self.sh_o, self.sh_d, self.sh_tmax = z(4, 3), z(4, 3), z(4)
+
+    @staticmethod
+    def bytes_for(size):
+        """Bytes that HybridBuffers(size) allocates."""
+        return sum(a.nbytes for a in vars(HybridBuffers(1)).values() if isinstance(a, np.ndarray)) * size
+
+    def offset_state(self):
+        """The offset arrays in the order the kernels take them."""
+        return (self.alive, self.status, self.beta, self.R, self.x, self.prim, self.wo, self.pdf, self.delta,
+                self.dist2, self.rough, self.hv, self.lights, self.trace, self.reconn, self.ray_o, self.ray_d,
+                self.tmax)
+
+
+@jit(inline="always")
+def _offset(o):
+    """(dx, dy) of offset o: +x, -x, +y, -y."""
+    if o == 0:
+        return 1, 0
+    if o == 1:
+        return -1, 0
+    if o == 2:
+        return 0, 1
+    return 0, -1
+
+
+@kernel
+def start_offsets(cam, width, height, crop, jitter, ps, key, pix, o_ray_o, o_ray_d, o_alive, o_status, o_beta, o_R,
+                  o_wo, o_hv, o_trace, o_reconn, G):
+    """Offset camera rays of base paths 0 .. n-1 (keys and film pixels from the camera source):
+    through the neighbouring pixel at the base's position inside its pixel."""
+    cw = crop[2]
+    for i in prange(key.shape[0]):
+        px = crop[0] + pix[i] % cw
+        py = crop[1] + pix[i] // cw
+        jx = draw(ps, key[i], i, DIM_PIXEL) if jitter else 0.5
+        jy = draw(ps, key[i], i, DIM_PIXEL + 1) if jitter else 0.5
+        for o in range(4):
+            dx, dy = _offset(o)
+            org, d = camera_ray(cam, width, height, px + dx, py + dy, jx, jy)
+            for c in range(3):
+                o_ray_o[i, o, c] = org[c]
+                o_ray_d[i, o, c] = d[c]
+                o_wo[i, o, c] = -d[c]
+                o_beta[i, o, c] = 1.0
+                G[i, o, c] = 0.0
+            o_alive[i, o] = True
+            o_status[i, o] = TRACED
+            o_R[i, o] = 1.0
+            o_hv[i, o] = False
+            o_trace[i, o] = True
+            o_reconn[i, o] = False
+
+
+@jit(inline="always")
+def _finite(o_beta, o_R, i, o):
+    """beta_o and R of offset o of path i are finite (a failed shift where they overflow)."""
+    return (math.isfinite(o_R[i, o]) and math.isfinite(o_beta[i, o, 0]) and math.isfinite(o_beta[i, o, 1])
+            and math.isfinite(o_beta[i, o, 2]))
+
+
+@kernel
+def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, roughness,
+                  b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
+                  o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights,
+                  o_trace, o_reconn, o_ray_o, o_ray_d, o_tmax):
+    """Shift each offset across the base's last bounce x_i -> x_{i+1} (entry k: path active[k], its
+    ray ray_d[k] and hit t, prim): reconnection (a visibility ray to test, o_reconn) or half-vector
+    copy (a ray to trace, o_trace); updates beta_o, R, and the offset's last density. o_lights: whether
+    the pair's weights for this bounce count the light techniques (not after a half-vector copy, whose
+    pairs take no NEE either: NEE reconnects, and both techniques must map a path to the same partner)."""
+    for k in prange(active.shape[0]):
+        i = active[k]
+        p1 = prim[k]
+        rough1 = True  # the environment counts as rough
+        x1 = (0.0, 0.0, 0.0)
+        if p1 >= 0:
+            rough1 = is_rough(mat_type, mat_param, tri_material[p1], roughness)
+            x1 = triangle_point(tri, p1, b1[k], b2[k])
+        wib_w = (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2])
+        px = b_prim[i]
+        mx = tri_material[px]
+        ngx = (tri_normal[px, 0], tri_normal[px, 1], tri_normal[px, 2])
+        sx, tx = frame(ngx)
+        wi_b = to_local(wib_w, sx, tx, ngx)
+        wo_b = to_local((b_wo[i, 0], b_wo[i, 1], b_wo[i, 2]), sx, tx, ngx)
+        pb = b_pdf[i]
+        for o in range(4):
+            o_trace[i, o] = False
+            o_reconn[i, o] = False
+            o_lights[i, o] = True
+            if not o_alive[i, o]:
+                continue
+            st = o_status[i, o]
+            if st == CONNECTED:
+                for c in range(3):
+                    o_beta[i, o, c] *= b_wt[i, c]
+                o_pdf[i, o] = pb
+                o_delta[i, o] = b_delta[i]
+                continue
+            if st == RECENT:  # at x_i with its own incoming direction
+                wo_o = to_local((o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]), sx, tx, ngx)
+                f = bsdfs.bsdf_eval(mat_type, mat_param, mx, wo_o, wi_b, True)
+                po = bsdfs.bsdf_pdf(mat_type, mat_param, mx, wo_o, wi_b)
+                if not po > 0.0:
+                    o_alive[i, o] = False
+                    continue
+                for c in range(3):
+                    o_beta[i, o, c] *= f[c] / pb
+                o_R[i, o] *= po / pb
+                o_pdf[i, o] = po
+                o_delta[i, o] = False
+                o_status[i, o] = CONNECTED
+                continue
+            py = o_prim[i, o]
+            my = tri_material[py]
+            y = (o_x[i, o, 0], o_x[i, o, 1], o_x[i, o, 2])
+            ngy = (tri_normal[py, 0], tri_normal[py, 1], tri_normal[py, 2])
+            sy, ty = frame(ngy)
+            wo_o = to_local((o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]), sy, ty, ngy)
+            if b_rough[i] and o_rough[i, o] and rough1:
+                # Reconnect y_i to x_{i+1} (or to the environment along the base's direction)
+                jac = 1.0
+                wn = wib_w
+                d2 = 0.0
+                n1 = (0.0, 0.0, 1.0)
+                if p1 >= 0:
+                    n1 = (tri_normal[p1, 0], tri_normal[p1, 1], tri_normal[p1, 2])
+                    wn, dist, jac = reconnection((b_x[i, 0], b_x[i, 1], b_x[i, 2]), y, x1, n1)
+                    if not jac > 0.0:
+                        o_alive[i, o] = False
+                        continue
+                    d2 = dist * dist
+                wi_o = to_local(wn, sy, ty, ngy)
+                f = bsdfs.bsdf_eval(mat_type, mat_param, my, wo_o, wi_o, True)
+                po = bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wi_o)
+                if not (po > 0.0 and math.isfinite(jac)):
+                    o_alive[i, o] = False
+                    continue
+                org = offset_point(y, ngy, wn, tri_eps[py])
+                tmax = np.inf
+                dr = wn
+                if p1 >= 0:  # stop short of x_{i+1}: its end offset toward y_i
+                    s1 = -tri_eps[p1] if dot(wn, n1) > 0.0 else tri_eps[p1]
+                    e = (x1[0] + s1 * n1[0], x1[1] + s1 * n1[1], x1[2] + s1 * n1[2])
+                    v = (e[0] - org[0], e[1] - org[1], e[2] - org[2])
+                    tmax = math.sqrt(dot(v, v))
+                    if not tmax > 0.0:
+                        o_alive[i, o] = False
+                        continue
+                    dr = (v[0] / tmax, v[1] / tmax, v[2] / tmax)
+                    for c in range(3):
+                        o_x[i, o, c] = x1[c]
+                for c in range(3):
+                    o_beta[i, o, c] *= f[c] * jac / pb
+                    o_ray_o[i, o, c] = org[c]
+                    o_ray_d[i, o, c] = dr[c]
+                    o_wo[i, o, c] = -wn[c]
+                o_tmax[i, o] = tmax
+                o_R[i, o] *= po * jac / pb
+                o_pdf[i, o] = po
+                o_delta[i, o] = False
+                o_prim[i, o] = p1
+                o_dist2[i, o] = d2
+                o_status[i, o] = RECENT
+                o_hv[i, o] = False
+                o_reconn[i, o] = _finite(o_beta, o_R, i, o)
+                o_alive[i, o] = o_reconn[i, o]
+                continue
+            # Half-vector copy (between vertices of the same class; a delta vertex and one that is not
+            # have no partner either way, and keep the base's two techniques)
+            o_lights[i, o] = b_delta[i] != bsdfs.bsdf_is_delta(mat_type, mat_param, my)
+            ok, wi_o, f, po, jac = half_vector_shift(mat_type, mat_param, mx, my, wo_b, wi_b, wo_o, b_delta[i])
+            if not ok:
+                o_alive[i, o] = False
+                continue
+            wiw = to_world(wi_o, sy, ty, ngy)
+            org = offset_point(y, ngy, wiw, tri_eps[py])
+            for c in range(3):
+                o_beta[i, o, c] *= f[c] * jac / pb
+                o_ray_o[i, o, c] = org[c]
+                o_ray_d[i, o, c] = wiw[c]
+                o_wo[i, o, c] = -wiw[c]
+            o_R[i, o] *= po * jac / pb
+            o_pdf[i, o] = po
+            o_delta[i, o] = b_delta[i]
+            o_hv[i, o] = b_rough[i] and o_rough[i, o]
+            o_trace[i, o] = True
+            if not _finite(o_beta, o_R, i, o):
+                o_alive[i, o] = False

@@ -1,0 +1,92 @@
+"""The hybrid shift's maps (Kettunen et al. 2015): whether a vertex is rough enough to reconnect,
+the reconnection's direction and Jacobian, and the half-vector copy with its Jacobian. Each rule
+keeps the mapping its own inverse (tests/gradient/test_hybrid.py)."""
+
+import math
+
+
+from .. import bsdfs
+from .._jit import jit
+from ..sampling import dot
+
+
+@jit(inline="always")
+def is_rough(mat_type, mat_param, m, roughness):
+    return bsdfs.bsdf_roughness(mat_type, mat_param, m) > roughness
+
+
+@jit(inline="always")
+def reconnection(x, y, z, nz):
+    """Reconnect a path from y to the point z (normal nz) that the base reached from x: (unit
+    direction y -> z, distance, Jacobian d omega_y / d omega_x = |cos_y| d(x, z)^2 / (|cos_x|
+    d(y, z)^2), both cosines at nz). Jacobian 0 where it is undefined (z at y, or either segment
+    grazing z's plane)."""
+    d = (z[0] - y[0], z[1] - y[1], z[2] - y[2])
+    d2 = dot(d, d)
+    db = (z[0] - x[0], z[1] - x[1], z[2] - x[2])
+    db2 = dot(db, db)
+    if not (d2 > 0.0 and db2 > 0.0):
+        return (0.0, 0.0, 1.0), 0.0, 0.0
+    dist = math.sqrt(d2)
+    w = (d[0] / dist, d[1] / dist, d[2] / dist)
+    cos_x = abs(dot(db, nz)) / math.sqrt(db2)
+    cos_y = abs(dot(w, nz))
+    if not (cos_x > 0.0 and cos_y > 0.0):
+        return w, dist, 0.0
+    return w, dist, cos_y * db2 / (cos_x * d2)
+
+
+@jit(inline="always")
+def half_vector_shift(mat_type, mat_param, mx, my, wo_b, wi_b, wo_o, delta):
+    """The direction of the offset at y (material my, incoming wo_o, local) that copies the base's
+    bounce at x (material mx, wo_b -> wi_b, local; delta: from a delta lobe). Returns (ok, wi_o,
+    f |cos| (discrete value for a delta lobe), density, Jacobian d wi_o / d wi_b). It fails (ok False)
+    where the offset would change lobe: reflect where the base refracted or the reverse, a delta lobe
+    where the base's was not or the reverse, total internal reflection."""
+    zero = (0.0, 0.0, 0.0)
+    transmit = wo_b[2] * wi_b[2] < 0.0
+    if delta:
+        wi, val, prob = bsdfs.delta_lobe(mat_type, mat_param, my, wo_o, transmit, True)
+        return prob > 0.0, wi, val, prob, 1.0
+    if bsdfs.bsdf_is_delta(mat_type, mat_param, my):
+        return False, zero, zero, 0.0, 0.0
+    if not transmit:
+        hb = (wo_b[0] + wi_b[0], wo_b[1] + wi_b[1], wo_b[2] + wi_b[2])
+        et_b = 1.0
+        et_o = 1.0
+    else:
+        if mat_type[mx] != bsdfs.ROUGH_DIELECTRIC or mat_type[my] != bsdfs.ROUGH_DIELECTRIC:
+            return False, zero, zero, 0.0, 0.0
+        ior = mat_param[mx, 7]
+        ei_b, et_b = (1.0, ior) if wo_b[2] > 0.0 else (ior, 1.0)
+        hb = (-(ei_b * wo_b[0] + et_b * wi_b[0]), -(ei_b * wo_b[1] + et_b * wi_b[1]),
+              -(ei_b * wo_b[2] + et_b * wi_b[2]))
+    hb2 = dot(hb, hb)
+    if not hb2 > 0.0:
+        return False, zero, zero, 0.0, 0.0
+    inv = 1.0 / math.sqrt(hb2)
+    h = (hb[0] * inv, hb[1] * inv, hb[2] * inv)
+    c = dot(wo_o, h)
+    if not transmit:
+        wi = (2.0 * c * h[0] - wo_o[0], 2.0 * c * h[1] - wo_o[1], 2.0 * c * h[2] - wo_o[2])
+        ho = (wo_o[0] + wi[0], wo_o[1] + wi[1], wo_o[2] + wi[2])
+    else:
+        ior = mat_param[my, 7]
+        ei_o, et_o = (1.0, ior) if wo_o[2] > 0.0 else (ior, 1.0)
+        hh = h if c >= 0.0 else (-h[0], -h[1], -h[2])
+        c = abs(c)
+        eta = ei_o / et_o
+        sin2 = eta * eta * (1.0 - c * c)
+        if sin2 >= 1.0:  # total internal reflection: the shift fails
+            return False, zero, zero, 0.0, 0.0
+        ct = math.sqrt(1.0 - sin2)
+        k = eta * c - ct
+        wi = (-eta * wo_o[0] + k * hh[0], -eta * wo_o[1] + k * hh[1], -eta * wo_o[2] + k * hh[2])
+        ho = (-(ei_o * wo_o[0] + et_o * wi[0]), -(ei_o * wo_o[1] + et_o * wi[1]), -(ei_o * wo_o[2] + et_o * wi[2]))
+    den = et_o * et_o * abs(dot(wi, h)) * hb2
+    if not den > 0.0 or (wo_o[2] * wi[2] < 0.0) != transmit:  # the offset's lobe must be the base's
+        return False, zero, zero, 0.0, 0.0
+    jac = et_b * et_b * abs(dot(wi_b, h)) * dot(ho, ho) / den
+    f = bsdfs.bsdf_eval(mat_type, mat_param, my, wo_o, wi, True)
+    pdf = bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wi)
+    return pdf > 0.0 and math.isfinite(jac), wi, f, pdf, jac
