@@ -36,11 +36,11 @@ import sys
 import time
 
 import numpy as np
-from scipy import stats
 
 import tracer
 from tracer.imageio import tonemap
 from tracer.provenance import git_commit
+from tracer.testing import z_critical
 
 from . import atomic
 
@@ -88,8 +88,7 @@ def bias_z(image, variance, ref, ref_var):
 
 def z_threshold(tests, alpha=0.01):
     """|z| threshold of a two-sided test at family-wise level alpha over `tests` tests (Sidak)."""
-    level = 1.0 - (1.0 - alpha) ** (1.0 / tests)
-    return float(stats.norm.isf(level / 2))
+    return z_critical(tests, alpha)
 
 
 def agreement(mean, var, ref, ref_var, alpha=0.01):

@@ -26,8 +26,8 @@ import pytest
 from numba import njit
 
 from tests import microfacet as M
-from tests.chi2 import ChiSquareTest, z_critical
-from tests.stats import assert_z
+from tracer.testing import ChiSquareTest, z_critical
+from tracer.testing.stats import assert_z
 from tracer import bsdfs as B
 
 

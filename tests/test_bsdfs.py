@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from tests.chi2 import ChiSquareTest, sidak_alpha, sphere_grid, z_critical
+from tracer.testing import ChiSquareTest, sidak, sphere_grid, z_critical
 from tracer import bsdfs as B
 
 N = 500_000  # samples per case
@@ -472,4 +472,4 @@ def test_lum_and_ns_to_alpha():
 
 def test_sidak_level():
     # Guard against a silently lax suite: the corrected level is well below 1%
-    assert sidak_alpha(NTESTS) < 0.01 / NTESTS * 1.01
+    assert sidak(NTESTS) < 0.01 / NTESTS * 1.01

@@ -4,7 +4,7 @@ import pytest
 
 import tracer
 from tests import scenes
-from tests.stats import assert_clean, assert_z, image_mean
+from tracer.testing.stats import assert_clean, assert_z, image_mean
 
 ACCELS = ["embree", "numba"]
 

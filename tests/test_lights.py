@@ -8,7 +8,7 @@ from numba import njit
 import tracer
 from tracer.lights import build_lights, env_pdf, sample_light, triangle_light_pdf
 from tests import scenes
-from tests.stats import assert_z
+from tracer.testing.stats import assert_z
 
 N_TESTS = 3  # z-test groups in this file (Sidak)
 

@@ -12,7 +12,7 @@ import pytest
 
 import tracer
 from tests import scenes
-from tests.stats import assert_clean
+from tracer.testing.stats import assert_clean
 from tracer.bvh import make_accel, ray_offsets
 
 FLOOR = 1000.0  # half-width of the big floor

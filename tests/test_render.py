@@ -8,7 +8,7 @@ import tracer
 from tracer import rng
 from tracer.film import Film
 from tests.reference import CORNELL, REF_SIZE, load
-from tests.stats import assert_clean, z_critical
+from tracer.testing.stats import assert_clean, sidak, z_critical
 
 
 @pytest.fixture(scope="module")
@@ -141,13 +141,13 @@ def test_cornell_matches_reference_pixels():
       threshold is 1.1e-3); +-0.5% is not caught (p 0.02-0.1)."""
     z = _z_against_reference("d5", spp=1024, seed=7)
     n_tests = 3
-    zc = z_critical(0.01 / n_tests, np.sum(~np.isnan(z)))
+    zc = z_critical(np.sum(~np.isnan(z)), 0.01 / n_tests)
     assert np.nanmax(np.abs(z)) < zc, f"max |z| {np.nanmax(np.abs(z)):.2f} >= {zc:.2f}"
     zm = _channel_mean_z(z)
-    assert np.all(np.abs(zm) < z_critical(0.01 / n_tests, 3)), zm
+    assert np.all(np.abs(zm) < z_critical(3, 0.01 / n_tests)), zm
     n = np.sum(~np.isnan(z), axis=0)
     p = stats.chi2.sf(np.nansum(z * z, axis=0), n)
-    level = 1.0 - (1.0 - 0.01 / n_tests) ** (1.0 / 3)
+    level = sidak(3, 0.01 / n_tests)
     assert np.all(p > level), f"sum of z^2 per channel too large: p = {p} (level {level:.2g})"
 
 
@@ -156,7 +156,7 @@ def test_cornell_unlimited_depth_matches_reference_mean():
     average z over the image is tested: it detects a bias spread over the image of about 0.7%
     (at 64 spp a pixel's standard deviation is about 10% of it)."""
     zm = _channel_mean_z(_z_against_reference("unlimited", spp=64, seed=7))
-    assert np.all(np.abs(zm) < z_critical(0.01, 3)), zm
+    assert np.all(np.abs(zm) < z_critical(3, 0.01)), zm
 
 
 def test_ctrl_c_returns_the_image_so_far(small_cornell):

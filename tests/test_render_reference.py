@@ -2,8 +2,8 @@
 test_integrator.py: an environment map lighting a tilted diffuse plate, the same map seen by the
 camera, and a rough conductor sphere under a constant sky.
 
-z-tests use the render's own variance estimate (tests/stats.py), Sidak-corrected over the tests
-of each test function (tests.stats.ALPHA is the family-wise level of one function).
+z-tests use the render's own variance estimate (tracer/testing/stats.py), Sidak-corrected over the tests
+of each test function (tracer.testing.ALPHA is the family-wise level of one function).
 Sensitivities quoted in the docstrings come from perturbing the reference (or the tracer, in a
 copy) against the same renders.
 """
@@ -15,7 +15,7 @@ import pytest
 import tracer
 from tests import microfacet as M
 from tests import scenes
-from tests.stats import ALPHA, assert_clean, assert_z, image_mean
+from tracer.testing.stats import ALPHA, assert_clean, assert_z, image_mean
 
 # The map: black but for one bright square above the horizon, off every axis and symmetry plane
 ENV_H, ENV_W = 32, 64

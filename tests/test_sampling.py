@@ -1,7 +1,7 @@
 """Tests of the warps and tables in tracer/sampling.py.
 
 Each warp is run over a batch by a small jitted loop, then checked against its density with a
-chi-square test (tests/chi2.py) and at its edges (u = 0, u -> 1). Statistical tests share one
+chi-square test (tracer/testing/chi2.py) and at its edges (u = 0, u -> 1). Statistical tests share one
 significance level with a Sidak correction over the NTESTS tests of this file.
 """
 import math
@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from tests.chi2 import ChiSquareTest, histogram_test, z_critical
+from tracer.testing import ChiSquareTest, histogram_test, z_critical
 from tracer import sampling as S
 from tracer._jit import jit
 

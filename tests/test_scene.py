@@ -8,7 +8,7 @@ import pytest
 import tracer
 from tracer import bsdfs
 from tests import scenes
-from tests.stats import assert_clean
+from tracer.testing.stats import assert_clean
 
 MTL_CASES = {
     "matte": ("Kd 0.5 0.4 0.3\nillum 1", bsdfs.DIFFUSE, dict(kd=[0.5, 0.4, 0.3])),

@@ -3,11 +3,10 @@ finite, non-black image at low resolution (regenerate with scenes/build_scenes.p
 import json
 import os
 
-import numpy as np
 import pytest
 
 import tracer
-from tests.stats import assert_clean
+from tracer.testing.stats import assert_clean
 
 SCENES_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
 NAMES = ["cornell", "ajar", "glossy", "caustic", "manylights", "window", "spotlit"]

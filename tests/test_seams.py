@@ -18,10 +18,10 @@ from tracer.rng import BLOCK, BOUNCE, DIR, path_key, pss_dims, uniform_batch
 from tracer.session import trace_source
 from tracer.sources import CameraSource, PrimarySampleSource, ProbeSource
 from tracer.splitting import throughput_plan
+from tracer.testing.stats import assert_clean, assert_z
 from tracer.wave import WaveBuffers
 
 from . import scenes
-from .stats import assert_clean, assert_z
 
 A, LE = 0.5, 1.0
 W = H = 16

@@ -22,7 +22,7 @@ from tracer import gradient
 from tracer.cli import main
 from tracer.errors import SettingsError
 from tracer.gradient import gradnet
-from tests.stats import assert_clean
+from tracer.testing.stats import assert_clean
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENES = ("ajar", "caustic", "cornell", "glossy", "manylights", "spotlit", "window")

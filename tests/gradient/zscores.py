@@ -4,7 +4,7 @@ import os
 import numpy as np
 
 import tracer
-from tests.stats import assert_clean
+from tracer.testing.stats import assert_clean
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from tests.chi2 import ChiSquareTest
+from tracer.testing.chi2 import ChiSquareTest
 from tracer.guiding import REGISTRY, make_guide
 from tracer.guiding.directional import bin_of_batch
 from tracer.guiding.spatial import guide_pdf_batch, guide_sample_batch

@@ -12,7 +12,7 @@ import pytest
 
 import tracer
 from tests import scenes
-from tests.stats import assert_clean, assert_z, image_mean
+from tracer.testing.stats import assert_clean, assert_z, image_mean
 from tracer.errors import SettingsError
 from tracer.guiding import REGISTRY, FrozenGuide, guide_names, make_guide
 from tracer.integrator import trace_wave

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from tests.chi2 import histogram_test
-from tests.stats import assert_z
+from tracer.testing.chi2 import histogram_test
+from tracer.testing.stats import assert_z
 from tracer.errors import SettingsError
 from tracer.guiding.directional import bin_of_batch, build_tables, map_pdf_batch, map_sample_batch, probabilities
 from tracer.guiding.reconstruct import make_reconstructor

@@ -5,6 +5,7 @@ import pytest
 from tracer.errors import SettingsError
 from tracer.guiding import make_guide
 from tracer.guiding.histogram import N_ALPHA, _mix_moments
+from tracer.testing import z_critical
 
 CAND = np.linspace(0.2, 0.8, N_ALPHA)
 
@@ -45,7 +46,7 @@ def test_second_moments_are_unbiased_for_every_candidate():
         v = F[k] ** 2 / (pc[k] * p)  # what each vertex adds
         se = v.std(ddof=1) / np.sqrt(n)
         # z-test per candidate, Sidak-corrected over the candidates at 1e-3 family-wise
-        assert abs(mom[j] / n - exact) < 3.9 * se, (c, mom[j] / n, exact, se)
+        assert abs(mom[j] / n - exact) < z_critical(len(CAND), 1e-3) * se, (c, mom[j] / n, exact, se)
 
 
 def test_choice_follows_the_data():

@@ -27,8 +27,8 @@ from numba import njit
 
 import tracer
 from tests import scenes
-from tests.chi2 import ChiSquareTest
-from tests.stats import assert_clean, assert_z, image_mean
+from tracer.testing.chi2 import ChiSquareTest
+from tracer.testing.stats import assert_clean, assert_z, image_mean
 from tracer.guiding import make_guide
 from tracer.guiding.directional import bin_of_batch
 from tracer.guiding.spatial import locate, slot_pdf, slot_sample

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import torch
 
-from tests.chi2 import ChiSquareTest
+from tracer.testing.chi2 import ChiSquareTest
 from tracer.errors import SettingsError
 from tracer.guiding import make_guide
 from tracer.guiding import photon_cnn

@@ -27,7 +27,7 @@ from scipy import stats
 
 import tracer
 from tests import scenes
-from tests.stats import assert_clean, assert_z, image_mean
+from tracer.testing.stats import assert_clean, assert_z, image_mean
 from tracer.errors import SettingsError
 from tracer.guiding import make_guide
 from tracer.guiding import pss_flow as pf

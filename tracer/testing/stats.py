@@ -1,17 +1,18 @@
-"""Statistical assertions shared by the tests: z-tests with Sidak-corrected levels."""
+"""z-tests with Sidak-corrected levels, and the checks every render test makes."""
 import numpy as np
 from scipy import stats
 
-ALPHA = 0.01  # family-wise false-failure rate of one test function
+ALPHA = 0.01  # family-wise false-failure rate of one test function (or one benchmark's check)
 
 
-def sidak(alpha, n_tests):
-    """Per-test level so that n independent tests together fail with probability alpha."""
-    return 1.0 - (1.0 - alpha) ** (1.0 / n_tests)
+def sidak(n_tests, alpha=ALPHA):
+    """Per-test level so that n_tests independent tests together fail with probability alpha."""
+    return 1.0 - (1.0 - alpha) ** (1.0 / max(int(n_tests), 1))
 
 
-def z_critical(alpha, n_tests=1):
-    return float(stats.norm.isf(sidak(alpha, n_tests) / 2.0))
+def z_critical(n_tests=1, alpha=ALPHA):
+    """Two-sided |z| threshold at the Sidak-corrected level for n_tests z-tests of family-wise level alpha."""
+    return float(stats.norm.isf(sidak(n_tests, alpha) / 2.0))
 
 
 def assert_z(estimate, variance, expected, n_tests=1, alpha=ALPHA, what="estimate"):
@@ -21,7 +22,7 @@ def assert_z(estimate, variance, expected, n_tests=1, alpha=ALPHA, what="estimat
     exp = np.broadcast_to(np.asarray(expected, dtype=np.float64), est.shape)
     assert np.all(var > 0), f"{what}: variance must be positive to test, got {var}"
     z = (est - exp) / np.sqrt(var)
-    zc = z_critical(alpha, max(n_tests, est.size))
+    zc = z_critical(max(n_tests, est.size), alpha)
     worst = int(np.argmax(np.abs(z)))
     assert np.all(np.abs(z) < zc), (
         f"{what}: |z| = {abs(z[worst]):.2f} >= {zc:.2f} at {worst}: got {est[worst]:.6g}, "

@@ -30,18 +30,9 @@ import math
 import numpy as np
 from scipy import stats
 
+from .stats import sidak
+
 _GL_X = np.array([-1.0, 1.0]) / math.sqrt(3.0)  # 2-point Gauss-Legendre nodes on [-1, 1]
-
-
-def sidak_alpha(ntests, significance=0.01):
-    """Per-test significance level so that `ntests` independent tests together reject a correct
-    sampler with probability `significance`."""
-    return 1.0 - (1.0 - significance) ** (1.0 / max(int(ntests), 1))
-
-
-def z_critical(ntests, significance=0.01):
-    """Two-sided z threshold at the Sidak-corrected level for `ntests` z-tests."""
-    return float(stats.norm.isf(0.5 * sidak_alpha(ntests, significance)))
 
 
 # --- Pearson's test on a histogram ---------------------------------------------------------------
@@ -90,7 +81,7 @@ def histogram_test(observed, expected, ntests=1, significance=0.01, labels=None)
     Returns (passed, message). `labels(i)` may name flat cell i in the report.
     """
     res = pooled_chi2(observed, expected)
-    alpha = sidak_alpha(ntests, significance)
+    alpha = sidak(ntests, significance)
     o = np.asarray(observed, dtype=np.float64).ravel()
     e = np.asarray(expected, dtype=np.float64).ravel()
     lines = [
