@@ -126,11 +126,13 @@ def combine_films(films, kinds=None):
             total.sumsq += f.sumsq
         return total.mean(), total.variance(), [1.0 if f.count.max() > 0 else 0.0 for f in films]
     weights = []
+    last = None  # the last film's variance: the result's when it is the only film used
     for f, ok, kind in zip(films, usable, kinds):
         if not ok or (kind == "pilot" and sum(usable) > 1):
             weights.append(0.0)
             continue
-        mv = float(f.variance().mean())
+        last = (f, f.variance())
+        mv = float(last[1].mean())
         weights.append(1.0 / mv if mv > 0 else math.inf)
     used = [f for f, x in zip(films, weights) if x > 0.0]
     w = np.array([x for x in weights if x > 0.0])
@@ -138,8 +140,11 @@ def combine_films(films, kinds=None):
         w = np.array([float(f.count.sum()) for f in used])
     w = w / w.sum()
     if len(used) == 1:
-        image, variance = used[0].mean(), used[0].variance()
-    else:  # one film's mean and variance at a time (the same sums, in the same order, as a sum())
+        image = used[0].mean()
+        variance = last[1] if last is not None and last[0] is used[0] else used[0].variance()
+    else:  # one film's mean and variance at a time, computed again rather than all of them held
+        # (the same sums, in the same order, as a sum())
+        last = None
         shape = (used[0].height, used[0].width, 3)
         image, variance = np.zeros(shape), np.zeros(shape)
         for wi, f in zip(w, used):
