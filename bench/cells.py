@@ -9,7 +9,7 @@ import sys
 import tracer
 
 from . import atomic
-from .convergence import reference_for, scene_path
+from .common import reference_for, scene_path
 
 
 def run_cells(prog, argv, a, run_cell, describe, summary):

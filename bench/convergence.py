@@ -52,70 +52,11 @@ import numpy as np
 
 import tracer
 from tracer import metrics
-from tracer.cli import _guide_opts
-from tracer.guiding import make_guide
-
 from . import atomic
-from .reference import ROOT, default_out, load
+from .common import GRADIENT_METHODS, check_method, method_spec, reference_for, render_args, scene_path  # noqa: F401
+from .reference import ROOT
 
 DEFAULT_OUT = os.path.join(ROOT, "bench", "results", "convergence")
-
-
-def scene_path(name, scene_dir=None):
-    """Path of the OBJ for a scene name (built-in first, then scene_dir/<name>/scene.obj)."""
-    if name.endswith(".obj") or name.endswith(".json"):
-        return name
-    own = os.path.join(ROOT, "scenes", name, f"{name}.obj")
-    if os.path.isfile(own):
-        return own
-    if scene_dir:
-        ext = os.path.join(scene_dir, name, "scene.obj")
-        if os.path.isfile(ext):
-            return ext
-    raise SystemExit(f"bench.convergence: no scene {name!r} in scenes/"
-                     + (f" or {scene_dir}" if scene_dir else " (external scenes need --scene-dir)"))
-
-
-def reference_for(path):
-    out = default_out(path)
-    if not os.path.isfile(os.path.join(out, "reference.exr")):
-        raise SystemExit(f"bench.convergence: no reference for {path}: run "
-                         f"python -m bench.reference {os.path.relpath(path, ROOT)} --time SECONDS")
-    return load(out)
-
-
-# gradient-domain methods: render() arguments (the default shift is hybrid)
-GRADIENT_METHODS = {
-    "gpt-l1": {"integrator": "gpt", "recon": "l1"},
-    "gpt-l2": {"integrator": "gpt", "recon": "l2"},
-    "gpt-replay-l1": {"integrator": "gpt", "shift": "replay", "recon": "l1"},
-    "gpt-gradnet": {"integrator": "gpt", "recon": "gradnet"},
-    "gpt-gradnet-raw": {"integrator": "gpt", "recon": "gradnet", "recon_settings": {"correction": 0}},
-}
-
-
-def method_spec(method):
-    """'photon' or 'photon:mixing=variance,sigma=2' -> (guide name, settings)."""
-    name, _, opts = method.partition(":")
-    return name, _guide_opts([o for o in opts.split(",") if o])
-
-
-def render_args(method):
-    """render() keyword arguments of a method: a gradient-domain one, or a guide with settings."""
-    if method in GRADIENT_METHODS:
-        return {k: (dict(v) if isinstance(v, dict) else v) for k, v in GRADIENT_METHODS[method].items()}
-    name, settings = method_spec(method)
-    return {"guide": name, "guide_settings": settings or None}
-
-
-def check_method(method):
-    """Fail before rendering on an unknown method or guide setting."""
-    if method.startswith("gpt") and method not in GRADIENT_METHODS:
-        raise SystemExit(f"bench.convergence: unknown gradient method {method!r}; valid: "
-                         + ", ".join(GRADIENT_METHODS))
-    if method not in GRADIENT_METHODS:
-        name, settings = method_spec(method)
-        make_guide(name, **settings)
 
 
 # guide statistics a record keeps (pss: the chosen model and the share of zero-valued samples;

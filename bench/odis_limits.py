@@ -23,7 +23,7 @@ from tracer import metrics
 from tracer.guiding import make_guide
 
 from . import atomic
-from .convergence import method_spec, reference_for, scene_path
+from .common import method_spec, reference_for, scene_path
 from .reference import ROOT
 
 METHODS = ("bsdf", "odis", "odis:weights=odis_w8", "odis:maps=reference")

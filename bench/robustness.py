@@ -22,7 +22,7 @@ import tracer
 from tracer import metrics
 from tracer.guiding import guide_names
 
-from .convergence import reference_for, scene_path
+from .common import reference_for, scene_path
 from .reference import bias_z, z_threshold
 
 SCENES = ("cornell", "ajar", "glossy", "caustic", "manylights", "window", "spotlit")

@@ -25,7 +25,7 @@ import numpy as np
 import tracer
 from tracer.guiding import FrozenGuide, make_guide
 
-from .convergence import method_spec, reference_for, scene_path
+from .common import method_spec, reference_for, scene_path
 
 
 def relative_variance(film, ref, spp):

@@ -4,7 +4,7 @@ import os
 
 import pytest
 
-from bench import convergence, reference
+from bench import common, convergence, reference
 from tests import scenes
 
 
@@ -12,7 +12,7 @@ def test_convergence_writes_records_charts_and_table(tmp_path, monkeypatch):
     obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=8, height=8)
     ref_dir = tmp_path / "ref"
     monkeypatch.setattr(reference, "default_out", lambda path: str(ref_dir))
-    monkeypatch.setattr(convergence, "default_out", lambda path: str(ref_dir))
+    monkeypatch.setattr(common, "default_out", lambda path: str(ref_dir))
     assert reference.main([obj, "--spp", "64", "--out", str(ref_dir)]) == 0
     out = tmp_path / "conv"
     assert convergence.main(["--scenes", obj, "--time", "0.05,0.1", "--spp", "1,2", "--seeds", "2",
@@ -44,7 +44,7 @@ def _box_run_at_one_time_budget(tmp_path, monkeypatch):
     """A 16-spp reference of a tiny closed box and a bsdf run at 0.05 s, 2 seeds: (out, ref_dir)."""
     obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=8, height=8)
     ref_dir = tmp_path / "ref"
-    monkeypatch.setattr(convergence, "default_out", lambda path: str(ref_dir))
+    monkeypatch.setattr(common, "default_out", lambda path: str(ref_dir))
     assert reference.main([obj, "--spp", "16", "--out", str(ref_dir)]) == 0
     out = tmp_path / "conv"
     assert convergence.main(["--scenes", obj, "--time", "0.05", "--seeds", "2", "--out", str(out)]) == 0

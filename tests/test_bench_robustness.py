@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import tracer
-from bench import convergence, reference, robustness
+from bench import common, convergence, reference, robustness
 from tests import scenes
 
 
@@ -11,7 +11,7 @@ from tests import scenes
 def box(tmp_path, monkeypatch):
     obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=48, height=48)
     ref_dir = tmp_path / "ref"
-    monkeypatch.setattr(convergence, "default_out", lambda path: str(ref_dir))
+    monkeypatch.setattr(common, "default_out", lambda path: str(ref_dir))
     assert reference.main([obj, "--spp", "256", "--out", str(ref_dir)]) == 0
     return obj, ref_dir
 

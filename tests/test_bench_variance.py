@@ -1,7 +1,7 @@
 """bench.variance on a tiny scene: the per-sample relative variance it reports."""
 import numpy as np
 
-from bench import convergence, reference, variance
+from bench import common, convergence, reference, variance
 from tests import scenes
 from tracer.film import N_AOV, Film
 
@@ -17,7 +17,7 @@ def test_relative_variance_is_the_one_sample_relmse():
 def test_variance_bench_runs_bsdf_and_a_frozen_guide(tmp_path, monkeypatch, capsys):
     obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=8, height=8)
     ref_dir = tmp_path / "ref"
-    monkeypatch.setattr(convergence, "default_out", lambda path: str(ref_dir))
+    monkeypatch.setattr(common, "default_out", lambda path: str(ref_dir))
     assert reference.main([obj, "--spp", "16", "--out", str(ref_dir)]) == 0
     assert variance.main(["--scenes", obj, "--methods", "photon", "--spp", "4", "--train-spp", "4",
                           "--seeds", "2", "--scale", "2"]) == 0
@@ -53,7 +53,7 @@ def test_ratio_and_efficiency_come_from_the_means(tmp_path, monkeypatch, capsys)
     and efficiency must be those of the means."""
     obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=8, height=8)
     ref_dir = tmp_path / "ref"
-    monkeypatch.setattr(convergence, "default_out", lambda path: str(ref_dir))
+    monkeypatch.setattr(common, "default_out", lambda path: str(ref_dir))
     assert reference.main([obj, "--spp", "4", "--out", str(ref_dir)]) == 0
     figures = {"bsdf": [(1.0, 0.01)] * 4, "photon": [(0.5, 0.02)] * 3 + [(4.5, 0.02)]}
     monkeypatch.setattr(variance, "measure", lambda scene, ref, m, *a: figures[m])

@@ -466,7 +466,7 @@ def test_compile_notice(tmp_path, capsys, monkeypatch):
         _, _, err = render_cli(capsys, tmp_path, "n", size=8, spp=1, quiet=quiet)
         assert ("compiling the kernels" in err) == (not cached and not quiet), (cached, quiet, err)
     monkeypatch.undo()
-    assert _jit.kernels_cached("integrator.shade")  # after a render, in this cache
+    assert _jit.kernels_cached("path.shade")  # after a render, in this cache
     assert not _jit.kernels_cached("integrator.no_such_kernel")
 
 

@@ -9,6 +9,7 @@ import pytest
 import tracer
 from tracer import memory
 from tracer.guiding import make_guide
+from tracer.integrators import make_integrator
 from tracer.wave import WaveBuffers
 from tests import scenes
 from tests.test_cli import CORNELL, fails_with
@@ -75,10 +76,7 @@ def test_estimate_bounds_the_allocations(method, kw, tmp_path):
         tracemalloc.stop()
     assert r.stats["nonfinite_samples"] == 0
     g = None if gpt else make_guide(method, **kw.get("guide_settings", {}))
-    wave_bytes = WaveBuffers.bytes_for(wave, split=g is not None and g.splits)
-    if gpt:
-        from tracer.gradient.offsets import HybridBuffers
-
-        wave_bytes += HybridBuffers.bytes_for(wave)
-    est = memory.estimate(w * h, 0, wave_bytes, g, "gpt" if gpt else "path", method[4:] if gpt else "l2")
+    integ = make_integrator(f"gpt:recon={method[4:]}" if gpt else "path")
+    wave_bytes = WaveBuffers.bytes_for(wave, split=g is not None and g.splits) + integ.wave_bytes(wave)
+    est = memory.estimate(w * h, 0, wave_bytes, g, integ)
     assert peak <= est["total"], (peak / (w * h), est)

@@ -58,7 +58,7 @@ def kernel(fn=None, **extra):
 
 def kernels_cached(*names):
     """Whether Numba's cache holds an index for each kernel `module.function` named (e.g.
-    "integrator.shade"): a cheap guess that a render will load its kernels rather than compile
+    "path.shade"): a cheap guess that a render will load its kernels rather than compile
     them for ~30 s (an index made from other sources, or for other types, still compiles)."""
     import glob
 

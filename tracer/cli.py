@@ -29,23 +29,26 @@ def _parser():
 
     p = _Parser(prog="tracer", description="Render an OBJ scene with a Numba + Embree path tracer.")
     p.add_argument("scene", nargs="?", help="scene.obj (with optional scene.json beside it) or a JSON scene file")
-    p.add_argument("--guide", default="bsdf", help=f"bounce sampler: {', '.join(guide_names())} (default bsdf)")
+    p.add_argument("--guide", default="bsdf", help=f"bounce sampler: {', '.join(guide_names())} (default bsdf), "
+                                                  "with settings as NAME:KEY=VALUE,... (e.g. photon:iterations=6)")
     p.add_argument("--guide-opt", action="append", default=[], metavar="KEY=VALUE",
                    help="a setting of the guide, repeatable (e.g. --guide-opt iterations=6); "
                         "an unknown key is an error that lists the valid ones")
     p.add_argument("--integrator", default="path",
-                   help="path (default) or gpt: gradient-domain path tracing, reconstructed by --recon")
-    p.add_argument("--shift", default="hybrid",
+                   help="path (default) or gpt (gradient-domain path tracing, reconstructed by --recon), with "
+                        "settings as NAME:KEY=VALUE,... (e.g. path:nee=0, gpt:shift=replay,recon=l1; "
+                        "--list-integrators shows them)")
+    p.add_argument("--shift", default=None,
                    help="gpt: the shift mapping of offset paths: hybrid (default: reconnection between rough "
-                        "vertices, half-vector copy elsewhere) or replay (the same random numbers)")
-    p.add_argument("--shift-roughness", type=float, default=0.001, metavar="R",
+                        "vertices, half-vector copy elsewhere) or replay (the same random numbers; works with guides)")
+    p.add_argument("--shift-roughness", type=float, default=None, metavar="R",
                    help="gpt, hybrid shift: vertices rougher than R (GGX alpha) are reconnected (default 0.001)")
-    p.add_argument("--recon", default="l2", help="gpt: screened Poisson reconstruction l2 (default: keeps the "
+    p.add_argument("--recon", default=None, help="gpt: screened Poisson reconstruction l2 (default: keeps the "
                                                  "image mean), l1 (robust to outliers, darker at low spp), gradnet "
                                                  "(learned), or none (the base image)")
     p.add_argument("--recon-opt", action="append", default=[], metavar="KEY=VALUE",
                    help="gpt: a setting of the reconstruction, repeatable (gradnet: weights=NAME, correction=0|1)")
-    p.add_argument("--recon-alpha", type=float, default=0.2, metavar="A",
+    p.add_argument("--recon-alpha", type=float, default=None, metavar="A",
                    help="gpt: weight of the base image in the reconstruction (default 0.2)")
     budget = p.add_mutually_exclusive_group()
     budget.add_argument("--spp", type=int, help="samples per pixel (default: the scene's render.spp)")
@@ -72,6 +75,8 @@ def _parser():
     p.add_argument("-v", "--verbose", action="store_true",
                    help="also show notes that change no pixel (e.g. zero-area triangles skipped)")
     p.add_argument("--list-guides", action="store_true", help="print the guides, their settings and defaults")
+    p.add_argument("--list-integrators", action="store_true",
+                   help="print the integrators, their settings and defaults")
     p.add_argument("--version", action="store_true", help="print the version and exit")
     return p
 
@@ -106,19 +111,19 @@ def _check_numbers(args):
         raise TracerError(f"--exposure must be a finite number of stops, got {args.exposure}")
 
 
-def _output_paths(out, variance, gradients=False):
+def _output_paths(out, variance, extra=()):
     base = os.path.splitext(out)[0]
     return [out, base + ".png", base + ".aovs.exr", base + ".json"] + ([base + ".variance.exr"] if variance else []) + \
-        ([base + s for s in (".base.exr", ".dx.exr", ".dy.exr")] if gradients else [])
+        [f"{base}.{name}.exr" for name in extra]
 
 
-def _check_output(out, variance, gradients=False):
+def _check_output(out, variance, extra=()):
     """Fail now, not after the render, if the outputs cannot be written: probe the folder (or,
     if it does not exist yet, the nearest folder above it, where it will be created) by creating
     and removing a file there; os.access says yes to root even where creating a file fails."""
     if not out.lower().endswith(".exr"):
         raise TracerError(f"{out}: output must be an .exr file (a PNG and a JSON are written beside it)")
-    for path in _output_paths(out, variance, gradients):
+    for path in _output_paths(out, variance, extra):
         if os.path.isdir(path):
             raise TracerError(f"{path}: cannot write output, a folder of that name exists")
     folder = os.path.dirname(os.path.abspath(out))
@@ -157,14 +162,13 @@ def _read_reference(path):
     return ref
 
 
-def _list_guides():
-    from .guiding import REGISTRY, guide_settings
-
-    for name, (factory, _) in REGISTRY.items():
-        doc = " ".join(line.strip() for line in re.split(r"\n\s*\n", (factory.__doc__ or "").strip())[0].splitlines()) \
-            if factory is not None else "BSDF importance sampling only (no guide)."
-        doc = re.sub(r"^`--guide \w+`:\s*", "", doc)
-        settings = guide_settings(name)
+def _list_methods(entries, flag):
+    """Print each (name, class or None, doc if None, {setting: default}): the first paragraph of its
+    docstring, and its settings."""
+    for name, factory, doc, settings in entries:
+        if factory is not None:
+            doc = " ".join(line.strip() for line in re.split(r"\n\s*\n", (factory.__doc__ or "").strip())[0].splitlines())
+        doc = re.sub(rf"^`--{flag} \w+`:\s*", "", doc)
         print(f"{name}: {doc}")
         if not settings:
             print("  (no settings)")
@@ -172,12 +176,25 @@ def _list_guides():
             print(f"  {key} = {value}")
 
 
+def _list_guides():
+    from .guiding import REGISTRY, guide_settings
+
+    _list_methods([(name, factory, "BSDF importance sampling only (no guide).", guide_settings(name))
+                   for name, (factory, _) in REGISTRY.items()], "guide")
+
+
+def _list_integrators():
+    from .integrators import REGISTRY, integrator_settings
+
+    _list_methods([(name, cls, "", integrator_settings(name)) for name, cls in REGISTRY.items()], "integrator")
+
+
 def _compile_notice(guide, accel):
     """One line before a render whose kernels are not in Numba's cache yet (a guess; see
     _jit.kernels_cached), so that ~30 s of silence does not look like a hang."""
     from . import _jit
 
-    names = ["integrator.shade"] + (["photons.scatter", "spatial.accumulate"] if guide != "bsdf" else []) + \
+    names = ["path.shade"] + (["photons.scatter", "spatial.accumulate"] if guide != "bsdf" else []) + \
         (["numba_bvh._intersect_batch"] if accel == "numba" else [])
     if not _jit.kernels_cached(*names):
         _note("compiling the kernels (about 40 s, more with a guide or gpt; once per install or update of the tracer) ...")
@@ -229,41 +246,38 @@ def _run(argv, warnings):
     if args.list_guides:
         _list_guides()
         return 0
+    if args.list_integrators:
+        _list_integrators()
+        return 0
     if args.scene is None:
         raise TracerError("the following arguments are required: scene (see --help)")
     _check_numbers(args)
     crop = _crop(args.crop)
     overrides = {k: getattr(args, k) for k in ("width", "height") if getattr(args, k) is not None}
     out = args.output or os.path.splitext(os.path.basename(args.scene))[0] + ".exr"
-    out_dir = _check_output(out, args.variance, args.integrator == "gpt")
-    ref = _read_reference(args.reference) if args.reference else None
-
     from .bvh import ACCELS
     from .errors import unknown_name
     from .guiding import make_guide
+    from .integrators import make_integrator
+    from .methods import parse_settings, parse_spec
 
     if args.accel not in ACCELS:
         raise unknown_name("accel", args.accel, ACCELS)
-    guide_settings = _guide_opts(args.guide_opt)
-    guide = make_guide(args.guide, **guide_settings)  # unknown names and settings fail here, before the scene loads
-    from . import gradient
-
-    if args.integrator not in gradient.INTEGRATORS:
-        raise unknown_name("integrator", args.integrator, gradient.INTEGRATORS)
-    if args.integrator == "gpt":
-        recon_settings = gradient.check_settings(args.shift, args.recon, args.recon_alpha, args.shift_roughness,
-                                                 _guide_opts(args.recon_opt, "--recon-opt"))[4]
-        if args.guide != "bsdf":
-            raise TracerError(f"--integrator gpt samples the BSDF only; --guide {args.guide} goes with --integrator path")
-    elif args.recon_opt:
-        raise TracerError("--recon-opt goes with --integrator gpt")
-    else:
-        recon_settings = None
+    # unknown names and settings fail here, before the scene loads
+    guide_name, guide_settings = parse_spec(args.guide)
+    guide_settings.update(parse_settings(args.guide_opt, "--guide-opt"))
+    guide = make_guide(guide_name, **guide_settings)
+    flags = {k: v for k, v in (("shift", args.shift), ("roughness", args.shift_roughness), ("recon", args.recon),
+                               ("recon_alpha", args.recon_alpha)) if v is not None}
+    integ = make_integrator(args.integrator, **flags, **parse_settings(args.recon_opt, "--recon-opt"))
+    integ.check_guide(guide, guide_name)
+    out_dir = _check_output(out, args.variance, integ.outputs)
+    ref = _read_reference(args.reference) if args.reference else None
     notice = [not args.quiet]  # once: before framing a scene without a camera, or before the render
 
     def compile_notice():
         if notice[0]:
-            _compile_notice(args.guide, args.accel)
+            _compile_notice(guide_name, args.accel)
             notice[0] = False
 
     scene = load_scene(args.scene, before_framing=compile_notice, **overrides)
@@ -280,18 +294,15 @@ def _run(argv, warnings):
             raise TracerError(f"{args.reference}: the {ref.shape[1]}x{ref.shape[0]} window is too small for "
                               "1-SSIM (at least 3x3)")
     check_memory(scene, _check_crop(crop, scene.width, scene.height), args.wave_size or DEFAULT_WAVE,
-                 None if args.time is not None else (args.spp or scene.render.spp), guide, args.integrator, args.shift,
-                 args.recon)
+                 None if args.time is not None else (args.spp or scene.render.spp), guide, integ)
     _make_folder(out_dir, out)
     warnings.show_held()  # the input is good: show what loading it found
     compile_notice()
-    result = render(scene, spp=args.spp, time=args.time, guide=args.guide, guide_settings=guide_settings,
+    result = render(scene, spp=args.spp, time=args.time, guide=guide_name, guide_settings=guide_settings,
                     max_depth=args.max_depth,
                     rr_depth=args.rr_depth, seed=args.seed, accel=args.accel, threads=args.threads,
                     pixel_filter=args.filter, crop=crop,
-                    wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet, integrator=args.integrator,
-                    shift=args.shift, recon=args.recon, recon_alpha=args.recon_alpha,
-                    shift_roughness=args.shift_roughness, recon_settings=recon_settings)
+                    wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet, integrator=integ)
     if ref is not None:
         result.stats["metrics"] = metrics.all_metrics(result.image, ref)
     exr, png, js = write_outputs(result, out, exposure=args.exposure, variance=args.variance, reference=ref)
@@ -307,24 +318,6 @@ def _run(argv, warnings):
     if ref is not None:
         print("  ".join(f"{k} {v:.6g}" for k, v in s["metrics"].items()))
     return EXIT_INTERRUPTED if s["interrupted"] else 0
-
-
-def _guide_opts(items, flag="--guide-opt"):
-    """--guide-opt (or `flag`) KEY=VALUE items as a dict; values parsed as int, float or left as text."""
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise TracerError(f"{flag} {item!r}: expected KEY=VALUE")
-        for conv in (int, float):
-            try:
-                out[key] = conv(value)
-                break
-            except ValueError:
-                continue
-        else:
-            out[key] = value
-    return out
 
 
 def main(argv=None):

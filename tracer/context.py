@@ -2,7 +2,7 @@
 
 A RenderContext is made by tracer.render() for one render and handed to the method
 (`guide.prepare(scene, ctx)`), to every source (`source.start(ctx, ...)`) and to
-integrator.trace_wave. Guides may read it; only the render writes `guide_state`.
+integrators.path.trace_wave. Guides may read it; only the render writes `guide_state`.
 """
 from typing import NamedTuple
 
@@ -34,7 +34,9 @@ class RenderContext:
                  the float32 coordinates the ray queries see there
     cam          the camera, packed for camera_ray
     seed         the render's seed (keys of camera paths and photons derive from it)
-    max_depth, rr_depth   path depth limits (Mitsuba conventions, see tracer.integrator)
+    max_depth, rr_depth   path depth limits (Mitsuba conventions, see tracer.integrators.path)
+    nee          next-event estimation on (the integrator's `nee` setting; off: emission found by
+                 a path counts in full, as in the guiding papers' equal-time tables)
     crop         (4,) int64 (x0, y0, w, h): the window of the image the film covers
     jitter       True for the box pixel filter, False for the point filter
     n_pixels     film pixels, w * h
@@ -42,7 +44,7 @@ class RenderContext:
                  render from guide.state() after each update
     """
 
-    def __init__(self, scene, accel, lights, seed, max_depth, rr_depth, pixel_filter, crop):
+    def __init__(self, scene, accel, lights, seed, max_depth, rr_depth, pixel_filter, crop, nee=True):
         self.scene, self.accel, self.lights = scene, accel, lights
         self.crop = np.asarray(crop, dtype=np.int64)
         self.jitter = pixel_filter == "box"
@@ -53,6 +55,7 @@ class RenderContext:
         self.seed = int(seed)
         self.max_depth = int(max_depth)
         self.rr_depth = int(rr_depth)
+        self.nee = bool(nee)
         self.tri_eps = ray_offsets(tri, accel.centre)
         self.surfaces = Surfaces(tri, self.tri_normal, scene.tri_material, self.tri_eps, scene.materials.type,
                                  scene.materials.param)

@@ -61,14 +61,12 @@ def available_bytes():
     return have
 
 
-def estimate(pixels, triangles, wave_bytes, guide=None, integrator="path", recon="l2"):
+def estimate(pixels, triangles, wave_bytes, guide=None, integrator=None):
     """{"per_pixel", "fixed", "total"} bytes of a render of `pixels` film pixels over `triangles`
-    triangles, with wave buffers of `wave_bytes`, by `guide` (a Guide, or None) or gradient-domain
-    (`integrator` "gpt" with reconstruction `recon`)."""
-    per_pixel = GPT_PIXEL_BYTES.get(recon, max(GPT_PIXEL_BYTES.values())) if integrator == "gpt" \
-        else PATH_PIXEL_BYTES
-    fixed = int(wave_bytes) + triangles * ACCEL_BYTES_PER_TRIANGLE + (GPT_FIXED_BYTES.get(recon, 0)
-                                                                      if integrator == "gpt" else 0)
+    triangles, with wave buffers of `wave_bytes`, by `guide` (a Guide, or None) and `integrator`
+    (an integrators.base.Integrator: its memory(); None: the path tracer's)."""
+    per_pixel, fixed = integrator.memory() if integrator is not None else (PATH_PIXEL_BYTES, 0)
+    fixed += int(wave_bytes) + triangles * ACCEL_BYTES_PER_TRIANGLE
     if guide is not None:
         per_pixel += guide.pixel_bytes
         fixed += guide.fixed_bytes

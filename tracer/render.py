@@ -15,22 +15,24 @@ import os
 import signal
 import threading
 import time as _time
-from dataclasses import dataclass, field
 
 import numba
 import numpy as np
 
-from . import gradient, memory
+from . import memory
 from .bvh import make_accel
 from .bvh.numba_bvh import _NumbaThreads
 from .context import RenderContext
 from .errors import SettingsError, unknown_name
-from .film import Film, aovs_of, combine_films
+from .film import Film
 from .guiding import make_guide, warm_up_guides
 from .guiding.base import Guide
-from .integrator import trace_wave
+from .integrators import make_integrator
+from .integrators.path import trace_wave
+from .methods import parse_spec
 from .lights import build_lights
 from .provenance import provenance
+from .result import RenderResult  # noqa: F401  (tracer.render.RenderResult)
 from .session import Session, Stop
 from .sources import CameraSource
 from .splitting import warm_up_splitting
@@ -39,25 +41,6 @@ from .wave import Stats, WaveBuffers
 DEFAULT_WAVE = 1 << 16
 log = logging.getLogger("tracer")
 FILTERS = ("box", "point")
-
-
-@dataclass
-class RenderResult:
-    """image (H,W,3) float32 mean radiance; variance (H,W,3) float32 variance of that mean;
-    aovs {albedo (H,W,3) at the first vertex that is not a delta BSDF, normal (H,W,3) and depth
-    (H,W,1) at the first hit} float32; stats (dict, JSON-ready)."""
-
-    image: np.ndarray
-    variance: np.ndarray
-    aovs: dict
-    stats: dict
-    film: Film = field(repr=False)
-    buffers: dict = field(default_factory=dict, repr=False)  # integrator gpt: base, dx, dy, ... (see render())
-
-    def __repr__(self):
-        s = self.stats
-        return (f"RenderResult({self.image.shape[1]}x{self.image.shape[0]}, {s['spp']} spp, "
-                f"{s['time_total']:.2f} s, {s['msamples_per_s']:.2f} Msamples/s)")
 
 
 def _check_crop(crop, width, height):
@@ -81,17 +64,18 @@ def _int_setting(name, value, lo):
 
 def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=None, seed=None,
            accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
-           guide_settings=None, pixel_filter="box", crop=None, integrator="path", shift="hybrid", recon="l2",
-           recon_alpha=0.2, shift_roughness=gradient.ROUGHNESS, recon_settings=None):
+           guide_settings=None, pixel_filter="box", crop=None, integrator="path", integrator_settings=None,
+           shift=None, recon=None, recon_alpha=None, shift_roughness=None, recon_settings=None):
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
     spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
     time       wall-clock budget in seconds (instead of spp): the accel's build, learning,
                inference, the passes and gpt's solve, not the kernels' compile; the last pass is
                cut at the deadline (stats: time_total, the budget's clock; time_render, the passes')
-    guide      registered sampler name (tracer.guiding.guide_names()); guide_settings: dict of its
-               settings (an unknown one is an error listing the valid ones). A guide object (e.g.
-               tracer.guiding.make_guide("photon", ...)) is accepted too, and can be inspected after.
+    guide      registered sampler name (tracer.guiding.guide_names()) or spec ("photon:iterations=6",
+               tracer.methods); guide_settings: dict of its settings (an unknown one is an error
+               listing the valid ones). A guide object (e.g. tracer.guiding.make_guide("photon",
+               ...)) is accepted too, and can be inspected after.
     max_depth, rr_depth, seed: override the scene's render settings (Mitsuba conventions)
     accel      "embree" or "numba"; threads: worker threads (default: all cores)
     callback   f(pass_index, film, stats_dict) called after every pass; return False to stop
@@ -100,17 +84,22 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                for per-pixel regression tests and debugging)
     crop       (x0, y0, w, h): render only that window of the image (its pixels are the same
                samples as in the full render)
-    integrator "path" (unidirectional path tracing) or "gpt" (gradient-domain path tracing,
-               tracer.gradient: bsdf sampling only): shift "hybrid" (reconnecting vertices rougher
-               than shift_roughness) or "replay"; recon "l2" (the default) or "l1" (screened
-               Poisson, with weight recon_alpha on the base; l1 is darker at low spp), "gradnet"
-               (the learned reconstruction; recon_settings {"weights": name, "correction": 0 or
-               1}, tracer.gradient.RECON_DEFAULTS) or "none" (the base image). The result's image
-               is then the reconstruction, its variance the base image's, and result.buffers holds
-               base, dx, dy (with variances), direct, indirect, albedo, normal and depth; stats time
-               the passes and the solve (time_solve) and give recon_mean_change (the image mean
-               over the base's, less 1) and negative_pixel_share. `callback` gets the base image's
-               film after each of gpt's passes.
+    integrator registered name or spec (tracer.integrators): "path" (unidirectional path tracing;
+               "path:nee=0" without next-event estimation) or "gpt" (gradient-domain path tracing,
+               tracer.gradient), e.g. "gpt:shift=replay,recon=l1"; integrator_settings: a dict of
+               its settings (an Integrator object is accepted too). gpt's settings: shift "hybrid"
+               (reconnecting vertices rougher than `roughness`; BSDF sampling only) or "replay"
+               (works with the guides that sample bounces: grid, photon, odis); recon "l2" (the
+               default) or "l1" (screened Poisson, with weight recon_alpha on the base; l1 is
+               darker at low spp), "gradnet" (the learned reconstruction; `weights`, the name of
+               shipped weights, `correction` 0 or 1) or "none" (the base image); nee 0 or 1. The
+               keywords shift, recon, recon_alpha, shift_roughness (roughness) and recon_settings
+               (weights, correction) are the same settings. The result's image is then the
+               reconstruction, its variance the base image's, and result.buffers holds base, dx, dy
+               (with variances), direct, indirect, albedo, normal and depth; stats time the passes
+               and the solve (time_solve) and give recon_mean_change (the image mean over the
+               base's, less 1) and negative_pixel_share. `callback` gets the base image's film
+               after each of gpt's passes. A guide trains by its own schedule before gpt's passes.
 
     The method runs its own schedule of passes (guide.schedule(session), tracer.session): BSDF
     sampling and guides that learn nothing render final passes alone; `grid` and `photon` run
@@ -139,23 +128,35 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     n_threads = min(threads or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS)
     with _NumbaThreads(n_threads):  # every kernel of this render on n_threads, restored after
         return _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress,
-                       callback, guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha,
-                       shift_roughness, recon_settings)
+                       callback, guide_settings, pixel_filter, crop,
+                       _integrator(integrator, integrator_settings, shift, recon, recon_alpha, shift_roughness,
+                                   recon_settings))
 
 
-def check_memory(scene, crop, wave_size, spp, guide, integrator="path", shift="hybrid", recon="l2"):
+def _integrator(spec, settings, shift, recon, recon_alpha, shift_roughness, recon_settings):
+    """The Integrator of render()'s arguments: the spec, its settings dict, and the keywords that
+    name gpt's settings (an integrator without them says so)."""
+    if settings is not None and not isinstance(settings, dict):
+        raise SettingsError(f"integrator_settings must be a dict, got {type(settings).__name__}")
+    if recon_settings is not None and not isinstance(recon_settings, dict):
+        raise SettingsError(f"recon_settings must be a dict, got {type(recon_settings).__name__}")
+    kw = {k: v for k, v in (("shift", shift), ("recon", recon), ("recon_alpha", recon_alpha),
+                            ("roughness", shift_roughness)) if v is not None}
+    return make_integrator(spec, **dict(settings or {}, **kw, **(recon_settings or {})))
+
+
+def check_memory(scene, crop, wave_size, spp, guide, integrator=None):
     """SettingsError (naming the scene, what the render needs and what the machine has) if a render
     of the crop window (x0, y0, w, h) would not fit in memory (tracer.memory); else the wave size
-    the render will use. spp None: a time budget. Called before anything is allocated."""
+    the render will use. spp None: a time budget; integrator: an Integrator (None: the path
+    tracer). Called before anything is allocated."""
     npix = crop[2] * crop[3]
     wave = min(wave_size, npix * (spp if spp is not None else 1024))
     wave_bytes = WaveBuffers.bytes_for(wave, split=guide is not None and guide.splits)
-    if integrator == "gpt" and shift == "hybrid":
-        from .gradient.offsets import HybridBuffers
-
-        wave_bytes += HybridBuffers.bytes_for(wave)
+    if integrator is not None:
+        wave_bytes += integrator.wave_bytes(wave)
     try:
-        memory.check(crop[2], crop[3], memory.estimate(npix, scene.n_triangles, wave_bytes, guide, integrator, recon))
+        memory.check(crop[2], crop[3], memory.estimate(npix, scene.n_triangles, wave_bytes, guide, integrator))
     except SettingsError as e:
         raise SettingsError(f"{scene.path}: {e}") from None
     return wave
@@ -178,30 +179,21 @@ def _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop):
 
 
 def make_context(scene, accel="embree", seed=None, max_depth=None, rr_depth=None, pixel_filter="box", crop=None,
-                 threads=None):
+                 threads=None, nee=True):
     """A RenderContext for tracing sources outside render() (session.trace_source): probe rays for
     training data or ground truth, a method's own passes. Settings as render(); threads: the
-    accel's worker threads (Numba's kernels use the process's thread count)."""
+    accel's worker threads (Numba's kernels use the process's thread count); nee: next-event
+    estimation on."""
     max_depth, rr_depth, seed, crop = _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop)
     if threads is not None:
         threads = _int_setting("threads", threads, 1)
     acc = make_accel(accel, scene.tri, threads=threads or numba.config.NUMBA_NUM_THREADS)
-    return RenderContext(scene, acc, build_lights(scene), seed, max_depth, rr_depth, pixel_filter, crop)
+    return RenderContext(scene, acc, build_lights(scene), seed, max_depth, rr_depth, pixel_filter, crop, nee)
 
 
 def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress, callback,
-            guide_settings, pixel_filter, crop, integrator, shift, recon, recon_alpha, shift_roughness,
-            recon_settings):
-    """render() on n_threads Numba threads."""
-    if integrator not in gradient.INTEGRATORS:
-        raise unknown_name("integrator", integrator, gradient.INTEGRATORS)
-    if integrator == "gpt":
-        shift, recon, recon_alpha, shift_roughness, recon_settings = gradient.check_settings(
-            shift, recon, recon_alpha, shift_roughness, recon_settings)
-        if not (isinstance(guide, str) and guide == "bsdf"):
-            raise SettingsError(f"integrator gpt samples the BSDF only; a guide ({guide!r}) goes with integrator path")
-    elif recon_settings:
-        raise SettingsError("recon_settings go with integrator gpt")
+            guide_settings, pixel_filter, crop, integ):
+    """render() on n_threads Numba threads, with the Integrator `integ`."""
     rs = scene.render
     max_depth, rr_depth, seed, crop = _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop)
     wave_size = _int_setting("wave_size", wave_size, 1)
@@ -210,7 +202,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     elif not (isinstance(time, (int, float)) and math.isfinite(time) and time > 0):
         raise SettingsError(f"time must be a positive number of seconds, got {time!r}")
     if isinstance(guide, str):
-        g = make_guide(guide, **(guide_settings or {}))
+        guide, spec_settings = parse_spec(guide)
+        g = make_guide(guide, **dict(spec_settings, **(guide_settings or {})))
     else:  # a guide object (for experiments): a tracer.guiding.base.Guide
         if not isinstance(guide, Guide):
             raise SettingsError(f"guide must be a name or a tracer.guiding.base.Guide, got {type(guide).__name__}")
@@ -218,14 +211,18 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         if guide_settings:
             raise SettingsError("guide_settings go with a guide name, not with a guide object")
 
+    integ.check_guide(g, guide)
+    integ.start()
+    if g is not None and not integ.nee:
+        g.learn_direct = True  # without NEE, the direct light is the guide's to find too
     npix = crop[2] * crop[3]
-    wave = check_memory(scene, crop, wave_size, spp if time is None else None, g, integrator, shift, recon)
+    wave = check_memory(scene, crop, wave_size, spp if time is None else None, g, integ)
 
     t_start = _time.perf_counter()
     acc = make_accel(accel, scene.tri, threads=n_threads)
     lights = build_lights(scene)
     t_setup = _time.perf_counter() - t_start
-    ctx = RenderContext(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter, crop)
+    ctx = RenderContext(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter, crop, integ.nee)
     # Trace one throwaway path first: it compiles the kernels (or loads them from the cache), so
     # that neither the time budget nor the stats count Numba's compile.
     t0 = _time.perf_counter()
@@ -236,8 +233,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         g.warm_up(ctx)
     if splits:
         warm_up_splitting(ctx)
-    if integrator == "gpt":
-        gradient.warm_up(ctx, shift, shift_roughness)
+    integ.warm_up(ctx)
     t_compile = _time.perf_counter() - t0
     t_start = _time.perf_counter() - t_setup  # the budget counts the scene set-up, not the compile
     if g is not None:
@@ -254,33 +250,21 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
                    if time is None else "{desc}: {n:.0f} spp [{elapsed}, budget %gs]" % time)
     settings = {"accel": acc.name, "threads": int(n_threads), "seed": int(seed), "max_depth": int(max_depth),
                 "rr_depth": int(rr_depth), "guide": guide, "pixel_filter": pixel_filter, "crop": list(crop),
-                "wave_size": int(wave_size), "integrator": integrator, **provenance()}
-    if integrator == "gpt":
-        settings.update(shift=shift, recon=recon, recon_alpha=recon_alpha, recon_settings=recon_settings)
-        if shift == "hybrid":
-            settings.update(shift_roughness=shift_roughness)
+                "wave_size": int(wave_size), **integ.stats_settings(), **provenance()}
 
     def snapshot():
         return _stats(scene, stats, session.passes, session.sample0, t_setup, t_start, t_render, settings, t_compile,
                       g)
 
     sigint = _Sigint()
-    reserve = 0.0
-    if integrator == "gpt" and time is not None:
-        reserve = gradient.solve_time_estimate(recon, crop[2], crop[3], recon_alpha, recon_settings)
+    reserve = integ.reserve(crop[2], crop[3]) if time is not None else 0.0
     session = Session(ctx, g, buf, stats, spp if time is None else None, time, t_start, bar, callback, snapshot,
-                      lambda: sigint.requested, reserve=reserve)
+                      lambda: sigint.requested, reserve=reserve, integrator=integ)
     interrupted = False
     t_render = _time.perf_counter()
-    gfilms = gradient.GradientFilms(crop[2], crop[3]) if integrator == "gpt" else None
     try:
         sigint.install()
-        if gfilms is not None:
-            gradient.gradient_passes(ctx, buf, stats, gfilms, session.passes, spp=spp, time=time,
-                                     time_left=session.time_left, limit=session.wave_limit,
-                                     before_wave=session._before_wave, after_wave=session._after_wave, shift=shift,
-                                     roughness=shift_roughness, after_pass=lambda film: _gpt_after_pass(session, film))
-        elif g is None:
+        if g is None:
             session.final_passes()
         else:
             g.schedule(session)
@@ -293,74 +277,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
             bar.n = stats.samples / npix  # what it showed, to the last wave, as stats["spp_mean"]
             bar.refresh()
             bar.close()
-    if gfilms is not None:
-        return _gpt_result(gfilms, stats, snapshot, session, interrupted, recon, recon_alpha, recon_settings)
-    films = session.films or [(session.final, "final")]
-    image, variance, weights = combine_films([f for f, _ in films], [k for _, k in films])
-    image, variance = image.astype(np.float32), variance.astype(np.float32)
-    aovs = aovs_of([f for f, _ in films])
-    st = snapshot()
-    st["interrupted"] = interrupted
-    for p_entry in st["passes"]:
-        p_entry["weight"] = weights[p_entry.pop("film")]
-    _report_dark(scene, image, st)
-    return RenderResult(image, variance, aovs, st, session.final)
-
-
-DARK_SHARE = 0.01  # a finished image with fewer lit pixels than this is reported
-
-
-def _report_dark(scene, image, stats):
-    """stats["lit_share"]: the share of pixels whose luminance is above zero; a warning on the
-    'tracer' logger, with the likely cause, when it is below DARK_SHARE."""
-    from .framing import lit_share
-
-    share = stats["lit_share"] = lit_share(image)
-    if share >= DARK_SHARE or stats["samples"] == 0:
-        return
-    what = "the image is black: no path reached a light" if share == 0.0 else \
-        f"only {share:.2%} of the pixels received light"
-    sidecar = os.path.splitext(scene.path)[0] + ".json"
-    if scene.framing:
-        cause = (f"the scene gives no camera and the framed view ({scene.framing}) sees little light; "
-                 f"give camera.origin and camera.target in {sidecar}")
-    elif stats["max_depth"] == 1:
-        cause = "max depth 1 shows only the emitters the camera sees directly"
-    else:
-        cause = (f"the camera ({sidecar}) may look past the scene or at the backs of walls, or the lights may face "
-                 "away (an MTL Ke emits from the counter-clockwise side only)")
-    log.warning(f"{scene.path}: {what}; {cause}")
-
-
-def _gpt_spp(passes):
-    """Samples every pixel has after gpt's passes (of a pass cut at the budget's end, its whole sweeps)."""
-    return sum(p.get("sweeps", p["spp"]) for p in passes)
-
-
-def _gpt_after_pass(session, film):
-    """The callback after a gpt pass, with the samples per pixel done so far in the stats."""
-    session.sample0 = _gpt_spp(session.passes)
-    session.after_pass(film)
-
-
-def _gpt_result(gfilms, stats, snapshot, session, interrupted, recon, alpha, recon_settings):
-    """The RenderResult of a gradient-domain render: the reconstruction, and the buffers."""
-    stats.samples = int(gfilms.base.count.sum())  # base samples (each traced five paths and five first hits)
-    session.sample0 = _gpt_spp(session.passes)
-    image, buffers, t_solve = gradient.solve(gfilms, recon, alpha, recon_settings)
-    st = snapshot()
-    st["interrupted"] = interrupted
-    st["time_solve"] = t_solve  # included in time_total
-    base_mean = float(np.mean(buffers["base"], dtype=np.float64))
-    # what the reconstruction did to the image's mean (l2 keeps it; l1 tends toward the median of
-    # the base's samples, darker at low spp: docs/gradient.md), and its negative pixels
-    st["recon_mean_change"] = float(np.mean(image, dtype=np.float64)) / base_mean - 1.0 if base_mean > 0 else 0.0
-    st["negative_pixel_share"] = float((image.min(axis=2) < 0.0).mean())
-    if recon == "gradnet":
-        st["time_inference"] = t_solve  # the network and its energy correction
-    _report_dark(session.ctx.scene, image, st)
-    return RenderResult(image.astype(np.float32), buffers["base_variance"], gfilms.base.aovs(), st, gfilms.base,
-                        buffers)
+    return integ.result(session, interrupted, snapshot)
 
 
 class _Sigint:

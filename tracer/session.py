@@ -4,14 +4,16 @@ render() makes a Session and hands it to the method: `guide.schedule(session)` (
 sampling and guides that learn nothing run `session.final_passes()`). A schedule renders passes
 with `run_pass` into films it opens with `new_film`, learns between them (run_pass with
 learn=True calls the guide's observe and update), and ends with `final_passes`, which fills the
-rest of the budget (spp or time) in doubling passes. The image combines the films by
-inverse variance (film.combine_films; pilot films are left out).
+rest of the budget (spp or time) in doubling passes of the render's integrator
+(tracer.integrators: the path tracer's passes into `final`, or gpt's base and offset paths).
+The integrator then makes the image from the films (the path tracer combines them by inverse
+variance, film.combine_films; pilot films are left out).
 """
 import math
 import time as _time
 
 from .film import Film
-from .integrator import trace_wave
+from .integrators.path import trace_wave
 from .sources import CameraSource
 from .wave import Stats, WaveBuffers
 
@@ -28,20 +30,29 @@ def trace_source(ctx, source, sink, spp=1, sample0=0, buf=None, stats=None, obse
     total = source.count(ctx, spp)
     buf = WaveBuffers(max(1, min(total, 1 << 16)), split=split is not None) if buf is None else buf
     stats = Stats() if stats is None else stats
+    run_waves(total, buf.size, lambda g0, n: trace_wave(ctx, buf, source, sink, sample0, g0, n, stats,
+                                                        observe=observe, direct=direct, split=split),
+              before_wave, after_wave, limit)
+    return stats
+
+
+def run_waves(total, size, trace, before_wave=None, after_wave=None, limit=None):
+    """Call trace(g0, n) for waves of at most `size` of `total` paths; before_wave, after_wave and
+    limit as trace_source. Returns the paths traced."""
     g0 = 0
     while g0 < total:
-        n = min(buf.size, total - g0)
+        n = min(size, total - g0)
         if limit is not None:
             n = min(n, limit(n))
             if n <= 0:
                 break
         if before_wave is not None:
             before_wave(n)
-        trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=observe, direct=direct, split=split)
+        trace(g0, n)
         if after_wave is not None:
             after_wave(n)
         g0 += n
-    return stats
+    return g0
 
 
 MIN_WAVE = 1024  # the shortest wave a time budget's end is cut to
@@ -55,15 +66,20 @@ class Stop(Exception):
 class Session:
     """The passes of one render.
 
-    ctx: the RenderContext; guide: the method (None: BSDF sampling); buf: the WaveBuffers;
+    ctx: the RenderContext; guide: the method (None: BSDF sampling); integrator: the
+    integrators.base.Integrator whose final passes these are; buf: the WaveBuffers;
     stats: the wave.Stats; spp: the target samples per pixel (time None) or None; time: the budget
     in seconds or None; t_start: perf_counter() the budget counts from; bar: a tqdm bar or None;
     callback(pass_index, film, stats) after each pass (False stops); snapshot(): the stats dict;
     interrupted(): whether Ctrl-C asked to stop (checked between waves).
     """
 
-    def __init__(self, ctx, guide, buf, stats, spp, time, t_start, bar, callback, snapshot, interrupted, reserve=0.0):
+    def __init__(self, ctx, guide, buf, stats, spp, time, t_start, bar, callback, snapshot, interrupted, reserve=0.0,
+                 integrator=None):
+        from .integrators.path import PathIntegrator
+
         self.ctx, self.guide, self.buf, self.stats = ctx, guide, buf, stats
+        self.integrator = PathIntegrator() if integrator is None else integrator
         self.spp, self.time, self.t_start = spp, time, t_start
         self.reserve = reserve  # seconds of the budget kept for the work after the last pass
         self.bar, self.callback, self.snapshot, self.interrupted = bar, callback, snapshot, interrupted
@@ -122,13 +138,17 @@ class Session:
         if self.bar is not None and self.guide is not None:
             self.bar.set_description(name)
 
-    def run_pass(self, film, spp, kind, learn=False, source=None, split=None, deadline=False):
+    def run_pass(self, film, spp, kind, learn=False, source=None, split=None, deadline=False, wave=None,
+                 sweeps=MIN_SWEEPS):
         """Render `spp` more samples per pixel from `source` (default: the camera) into `film`, in
         waves; with `learn`, the guide observes the vertices and updates after the pass. split: a
         splitting.SplitPlan for the waves (final passes), or None. deadline: with a time budget,
-        the pass ends when the budget does (wave_limit), its last sweep over the pixels partial
-        (those pixels get one sample more than the rest; out_of_time is set). Raises
-        KeyboardInterrupt between waves after Ctrl-C, Stop when the callback returns False."""
+        the pass ends when the budget does (wave_limit, never before every pixel of `film` has
+        `sweeps` samples), its last sweep over the pixels partial (those pixels get one sample
+        more than the rest; out_of_time is set). wave(sample0, g0, n), if given, traces each wave
+        of the pass's spp x pixels paths instead of the path tracer (an integrator's own, e.g.
+        gpt's base and offsets, which adds to `film` itself). Raises KeyboardInterrupt between
+        waves after Ctrl-C, Stop when the callback returns False."""
         ctx, buf, g = self.ctx, self.buf, self.guide
         source = self.camera if source is None else source
         index = next((j for j, (f, _) in enumerate(self.films) if f is film), None)
@@ -138,10 +158,15 @@ class Session:
         observe = g.observe if learn else None
         direct = g.learn_direct if g is not None else True
         self._pass_paths, self._pass_seconds = 0, 0.0
-        limit = (lambda n: self.wave_limit(n, film)) if deadline and self.time is not None else None
-        trace_source(ctx, source, film, spp, self.sample0, buf, self.stats, observe, direct, split, self._before_wave,
-                     self._after_wave, limit)
-        total = source.count(ctx, spp)
+        limit = (lambda n: self.wave_limit(n, film, sweeps)) if deadline and self.time is not None else None
+        if wave is None:
+            trace_source(ctx, source, film, spp, self.sample0, buf, self.stats, observe, direct, split,
+                         self._before_wave, self._after_wave, limit)
+            total = source.count(ctx, spp)
+        else:
+            total = spp * ctx.n_pixels
+            sample0 = self.sample0
+            run_waves(total, buf.size, lambda g0, n: wave(sample0, g0, n), self._before_wave, self._after_wave, limit)
         entry = {"spp": spp, "time": _time.perf_counter() - tp, "kind": kind, "film": index}
         if self._pass_paths < total:  # cut at the end of the budget: count the whole sweeps
             self.out_of_time = True
@@ -178,13 +203,16 @@ class Session:
             self.bar.update(n / self.ctx.n_pixels)
 
     def final_passes(self, split=None, source=None):
-        """Fill the rest of the budget with final passes into self.final: each twice the last pass's
-        spp (the first as many as the last pass, or 1), up to `spp` in all; or, with a time budget,
-        each at most what the time left holds at the final passes' speed so far (rounded up), until
-        the budget ends, the last pass cut at the deadline (run_pass). source: where the paths
+        """Fill the rest of the budget with the integrator's final passes into its final film
+        (self.final for the path tracer): each twice the last pass's spp (the first as many as the
+        last pass, or 1), up to `spp` in all; or, with a time budget, each at most what the time
+        left holds at the final passes' speed so far (rounded up), until the budget ends, the last
+        pass cut at the deadline (run_pass). split: a splitting.SplitPlan; source: where the paths
         start (default: the camera; e.g. a guiding.pss.WarpSource)."""
-        if not any(f is self.final for f, _ in self.films):
-            self.films.append((self.final, "final"))
+        it = self.integrator
+        film = it.final_film(self)
+        if not any(f is film for f, _ in self.films):
+            self.films.append((film, it.film_kind))
         self.phase("final")
         passes = self.passes
         pass_spp = passes[-1]["spp"] if passes else 1
@@ -196,12 +224,12 @@ class Session:
                 pass_spp = min(pass_spp, self.spp - self.sample0)
             else:
                 left = self.time_left()
-                if self.out_of_time or (left <= 0.0 and self.final.count.min() >= MIN_SWEEPS):
+                if self.out_of_time or (left <= 0.0 and film.count.min() >= it.sweeps):
                     break  # (a final film gets its MIN_SWEEPS whatever the budget: see wave_limit)
                 if passes[first_final:]:
                     ref = passes[first_final:]
                     per_spp = sum(p["time"] for p in ref) / sum(p.get("paths", p["spp"] * self.ctx.n_pixels)
                                                                / self.ctx.n_pixels for p in ref)
                     pass_spp = max(1, min(pass_spp, math.ceil(left / per_spp)))
-            self.run_pass(self.final, pass_spp, "final", source=source, split=split, deadline=True)
+            it.final_pass(self, film, pass_spp, split, source)
             pass_spp *= 2

@@ -93,13 +93,14 @@ def test_no_nonfinite_pixel_on_any_built_in_scene(name):
 
 def test_settings_errors():
     scene = _scene("cornell", 8, 8)
-    with pytest.raises(SettingsError, match="no setting 'sigma'; valid: correction, weights"):
+    with pytest.raises(SettingsError, match="integrator 'gpt' has no setting 'sigma'; valid: correction, nee, recon, recon_alpha, roughness, "
+                                                "shift, weights"):
         tracer.render(scene, spp=1, integrator="gpt", recon="gradnet", recon_settings={"sigma": 3})
     with pytest.raises(SettingsError, match="correction must be 0 or 1"):
         tracer.render(scene, spp=1, integrator="gpt", recon="gradnet", recon_settings={"correction": 2})
     with pytest.raises(SettingsError, match="nosuch.json: no weights"):
         tracer.render(scene, spp=1, integrator="gpt", recon="gradnet", recon_settings={"weights": "nosuch"})
-    with pytest.raises(SettingsError, match="recon_settings go with integrator gpt"):
+    with pytest.raises(SettingsError, match="integrator 'path' has no setting 'correction'; valid: nee"):
         tracer.render(scene, spp=1, recon_settings={"correction": 0})
     with pytest.raises(SettingsError, match="reconstruction 'l1' has no setting"):
         tracer.render(scene, spp=1, integrator="gpt", recon="l1", recon_settings={"weights": "gradnet"})
@@ -120,7 +121,7 @@ def test_cli(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nosuch.json: no weights" in err[0]
     assert main([obj, "--recon-opt", "correction=0", "-q", "-o", str(tmp_path / "i.exr")]) == 2
-    assert "--recon-opt goes with --integrator gpt" in capsys.readouterr().err
+    assert "integrator 'path' has no setting 'correction'" in capsys.readouterr().err
     assert main([obj, "--integrator", "gpt", "--recon", "gradnet", "--recon-opt", "weights=odis", "-q",
                  "-o", str(tmp_path / "j.exr")]) == 2  # another network's weights
     err = capsys.readouterr().err.strip().splitlines()
@@ -141,4 +142,4 @@ def test_bench_convergence_runs_gpt_gradnet():
         assert recs[m]["solve_s"] > 0 and recs[m]["nonfinite_samples"] == 0
         assert math.isfinite(recs[m]["metrics"]["relMSE"])
     assert recs["gpt-gradnet"]["metrics"]["relMSE"] != recs["gpt-gradnet-raw"]["metrics"]["relMSE"]
-    assert convergence.GRADIENT_METHODS["gpt-gradnet-raw"]["recon_settings"] == {"correction": 0}
+    assert convergence.GRADIENT_METHODS["gpt-gradnet-raw"]["integrator"] == "gpt:recon=gradnet,correction=0"

@@ -15,7 +15,7 @@ from tests import scenes
 from tracer.testing.stats import assert_clean, assert_z, image_mean
 from tracer.errors import SettingsError
 from tracer.guiding import REGISTRY, FrozenGuide, guide_names, make_guide
-from tracer.integrator import trace_wave
+from tracer.integrators.path import trace_wave
 from tracer.sources import CameraSource
 from tracer.splitting import WeightWindow, throughput_plan
 from tracer.wave import Stats, WaveBuffers

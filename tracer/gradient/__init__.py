@@ -1,4 +1,4 @@
-"""Gradient-domain path tracing (`render(..., integrator="gpt")`): a base image and its
+"""Gradient-domain path tracing (`render(..., integrator="gpt")`, tracer.integrators.gpt): a base image and its
 horizontal and vertical gradients from correlated offset paths (the hybrid shift: hybrid.py; random
 replay: replay.py), reconstructed by screened Poisson (poisson.py) or by GradNet (gradnet.py, whose
 settings are RECON_DEFAULTS["gradnet"]: weights, the name of the shipped weights; correction, 1 to
@@ -12,11 +12,9 @@ import numpy as np
 from ..errors import SettingsError, unknown_name
 from . import poisson
 from .films import GradientFilms  # noqa: F401
-from .passes import gradient_passes  # noqa: F401
 
 SHIFTS = ("hybrid", "replay")
 ROUGHNESS = 0.001  # the hybrid shift reconnects between vertices rougher than this
-INTEGRATORS = ("path", "gpt")
 RECONSTRUCTIONS = poisson.RECONSTRUCTIONS + ("gradnet",)
 RECON_DEFAULTS = {"gradnet": {"weights": "gradnet", "correction": 1}}
 

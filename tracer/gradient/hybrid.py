@@ -43,7 +43,7 @@ import time as _time
 
 import numpy as np
 
-from ..integrator import MAX_BOUNCES
+from ..integrators.path import MAX_BOUNCES
 from ..rng import no_primary_samples
 from ..sources import CameraSource
 from ..wave import sanitize

@@ -9,7 +9,7 @@ from numba import prange
 
 from .. import bsdfs
 from .._jit import jit, kernel
-from ..integrator import MAX_BOUNCES
+from ..integrators.path import MAX_BOUNCES
 from ..lights import ENV_NONE, env_pdf, env_radiance, triangle_emission, triangle_light_pdf
 from ..rng import DIR, LIGHT, LIGHT_POS, LOBE, RR, bounce_dim, draw
 from ..sampling import dot, frame, to_local, triangle_point

@@ -18,7 +18,7 @@ after the solve.
 
 import numpy as np
 
-from ..integrator import trace_wave
+from ..integrators.path import trace_wave
 from ..sources import CameraSource
 from .films import OFFSETS, add_gradients
 

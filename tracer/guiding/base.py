@@ -50,6 +50,7 @@ class Guide:
     spp_init = 1  # Algorithm 1's N_c: iteration t renders 2^t N_c spp
     train_budget = 1.0  # with a time budget: share of it that learning may take
     splitting = None  # splitting.WeightWindow, or None (never splits)
+    camera_paths = True  # final passes start at the camera (False: from the guide's own source, e.g. pss's warp)
     time_learning = 0.0  # seconds spent observing and learning
     time_update = 0.0  # seconds spent rebuilding maps between passes
     time_inference = 0.0  # seconds of network inference

@@ -169,6 +169,8 @@ class WarpSource(CameraSource):
 class PSSGuide(Guide):
     """`--guide pss`: a Real NVP warp of the pixel position and the first bounces' directions in primary sample space, learned per scene (Zheng & Zwicker 2019)."""
 
+    camera_paths = False  # the final passes draw from the learned warp (WarpSource)
+
     name = "pss"
     learns = False  # no vertex records: it learns from the candidate pass's samples
     # memory (tracer.memory): the candidate film and its samples' luminance; bench.memory measured
@@ -229,7 +231,7 @@ class PSSGuide(Guide):
 
         torch.optim.Adam([torch.zeros(1, requires_grad=True)])
 
-        from ..integrator import trace_wave
+        from ..integrators.path import trace_wave
         from ..sources import PrimarySampleSource
         from ..wave import Stats, WaveBuffers
 

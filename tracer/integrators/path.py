@@ -31,23 +31,26 @@ import time
 import numpy as np
 from numba import prange
 
-from ._jit import kernel
-from .guiding.records import finalize_records
-from .guiding.spatial import locate
-from .lights import ENV_NONE
-from .rng import DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, draw
-from .sampling import dot, frame, to_local, triangle_point
-from .shading import (emitted_env, emitted_surface, next_event, offset_point, russian_roulette, sample_mixture,
+from .._jit import kernel
+from ..film import aovs_of, combine_films
+from ..guiding.records import finalize_records
+from ..guiding.spatial import locate
+from ..lights import ENV_NONE
+from ..rng import DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, draw
+from ..sampling import dot, frame, to_local, triangle_point
+from ..shading import (emitted_env, emitted_surface, next_event, offset_point, russian_roulette, sample_mixture,
                       write_aovs, write_shadow)
-from .splitting import merge_copies, split_wave
-from .wave import add_unoccluded, compact, sanitize
+from ..splitting import merge_copies, split_wave
+from ..result import RenderResult, report_dark
+from ..wave import add_unoccluded, compact, sanitize
+from .base import Integrator
 
 MAX_BOUNCES = 4096
 
 
 @kernel
 def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, lt, gs,
-          ps, max_depth, rr_depth,
+          ps, max_depth, rr_depth, nee,
           beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open,
           alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
           record, rec_base, prev_rec, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0,
@@ -56,7 +59,8 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
 
     Entry k of the hit arrays (t, prim, b1, b2) and of ray_o/ray_d belongs to path slot
     active[k]. surf: the scene's Surfaces (triangles, normals, materials, ray offsets); lt: the
-    lights; gs: the guide's GuideState (empty: BSDF sampling); ps: the wave's PrimarySamples.
+    lights; gs: the guide's GuideState (empty: BSDF sampling); ps: the wave's PrimarySamples;
+    nee: next-event estimation on (else emission found by a path counts in full, without MIS).
     Path state (beta ... aov) is per slot; L_cam[i] gets the light the camera ray sees directly
     (the emission at the first hit, or the environment if it escapes). Writes the continuation ray to next_o/next_d[k] with
     alive[k], and a shadow ray (origin, unit direction, tmax, unoccluded contribution) with
@@ -89,7 +93,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         if p < 0:
             # Escaped: environment light, MIS-weighted against NEE's choice of it
             if lt.env_type != ENV_NONE:
-                le, w = emitted_env(lt, wray, dk, prev_pdf[i], prev_delta[i])
+                le, w = emitted_env(lt, wray, dk, prev_pdf[i], prev_delta[i] or not nee)
                 for c in range(3):
                     L[i, c] += b[c] * le[c] * w
                 if dk == 0:
@@ -109,7 +113,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
 
         # Emission, MIS-weighted against NEE's choice of this triangle
         if lt.light_of_tri[p] >= 0:
-            le, w = emitted_surface(lt, p, t[k] * t[k], cos_o, dk, prev_pdf[i], prev_delta[i])
+            le, w = emitted_surface(lt, p, t[k] * t[k], cos_o, dk, prev_pdf[i], prev_delta[i] or not nee)
             for c in range(3):
                 L[i, c] += b[c] * le[c] * w
             if dk == 0:
@@ -138,7 +142,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             node, slot, a = locate(gs, x, nf, pix[i], dk)
 
         # Next-event estimation (not at delta BSDFs)
-        if not delta:
+        if nee and not delta:
             ok, so, sd, tmax, contrib = next_event(
                 mat_type, mat_param, m, lt, tri, x, ng, s, tt, wo, b, gs, slot, a, tri_eps[p],
                 tri_eps, draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
@@ -238,7 +242,7 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
         if record > 0 and n_rec + n_active > rec.strategy.shape[0]:
             rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
         shade(active[:n_active], ro, rd, *hits, *ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth,
-              ctx.rr_depth, buf.beta, buf.L, buf.L_cam, buf.depth, buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.pix,
+              ctx.rr_depth, ctx.nee, buf.beta, buf.L, buf.L_cam, buf.depth, buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.pix,
               buf.aov, buf.aov_open, buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow,
               record, n_rec, buf.prev_rec, **rec.kernel_args())
         t0 = stats.tick("shade", t0)
@@ -269,3 +273,25 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
         sink.add(buf.index[:n], buf.L[:n], buf.aov[:n], buf.weight[:n] if source.weighted else None)
     stats.samples += n
     stats.tick("film", t0)
+
+
+class PathIntegrator(Integrator):
+    """`--integrator path`: unidirectional path tracing (this module's wavefront), NEE with MIS
+    (`nee` 1, the default) or without NEE (`nee` 0: emission found by a path counts in full; the
+    guiding papers' equal-time tables are rendered so). The image combines the films of the
+    method's passes by inverse mean variance (film.combine_films; pilots left out)."""
+
+    name = "path"
+    DEFAULTS = {"nee": 1}
+
+    def result(self, session, interrupted, snapshot):
+        films = session.films or [(session.final, "final")]
+        image, variance, weights = combine_films([f for f, _ in films], [k for _, k in films])
+        image, variance = image.astype(np.float32), variance.astype(np.float32)
+        aovs = aovs_of([f for f, _ in films])
+        st = snapshot()
+        st["interrupted"] = interrupted
+        for p_entry in st["passes"]:
+            p_entry["weight"] = weights[p_entry.pop("film")]
+        report_dark(session.ctx.scene, image, st)
+        return RenderResult(image, variance, aovs, st, session.final)

@@ -1,0 +1,72 @@
+"""What the benches share: scene names to paths, references, and method specs to render() arguments."""
+import os
+
+from tracer.guiding import make_guide
+from tracer.integrators import make_integrator
+from tracer.methods import parse_spec
+
+from .reference import ROOT, default_out, load
+
+
+def scene_path(name, scene_dir=None):
+    """Path of the OBJ for a scene name (built-in first, then scene_dir/<name>/scene.obj)."""
+    if name.endswith(".obj") or name.endswith(".json"):
+        return name
+    own = os.path.join(ROOT, "scenes", name, f"{name}.obj")
+    if os.path.isfile(own):
+        return own
+    if scene_dir:
+        ext = os.path.join(scene_dir, name, "scene.obj")
+        if os.path.isfile(ext):
+            return ext
+    raise SystemExit(f"bench.convergence: no scene {name!r} in scenes/"
+                     + (f" or {scene_dir}" if scene_dir else " (external scenes need --scene-dir)"))
+
+
+def reference_for(path):
+    out = default_out(path)
+    if not os.path.isfile(os.path.join(out, "reference.exr")):
+        raise SystemExit(f"bench.convergence: no reference for {path}: run "
+                         f"python -m bench.reference {os.path.relpath(path, ROOT)} --time SECONDS")
+    return load(out)
+
+
+# gradient-domain methods: render() arguments (the default shift is hybrid)
+GRADIENT_METHODS = {
+    "gpt-l1": {"integrator": "gpt:recon=l1"},
+    "gpt-l2": {"integrator": "gpt:recon=l2"},
+    "gpt-replay-l1": {"integrator": "gpt:shift=replay,recon=l1"},
+    "gpt-gradnet": {"integrator": "gpt:recon=gradnet"},
+    "gpt-gradnet-raw": {"integrator": "gpt:recon=gradnet,correction=0"},
+}
+
+
+def method_spec(method):
+    """'photon' or 'photon:mixing=variance,sigma=2' -> (guide name, settings) (tracer.methods)."""
+    return parse_spec(method)
+
+
+def render_args(method):
+    """render() keyword arguments of a bench method: a named gradient-domain one (GRADIENT_METHODS),
+    or GUIDE[:KEY=VALUE,...][/INTEGRATOR[:KEY=VALUE,...]] (tracer.methods' spec grammar, e.g.
+    'photon', 'photon:sigma=2/gpt:shift=replay', 'bsdf/path:nee=0')."""
+    if method in GRADIENT_METHODS:
+        return {k: (dict(v) if isinstance(v, dict) else v) for k, v in GRADIENT_METHODS[method].items()}
+    guide, _, integrator = method.partition("/")
+    name, settings = method_spec(guide)
+    args = {"guide": name, "guide_settings": settings or None}
+    if integrator:
+        args["integrator"] = integrator
+    return args
+
+
+def check_method(method):
+    """Fail before rendering on an unknown method, guide, integrator or setting, or a guide the
+    integrator cannot run with."""
+    if method.startswith("gpt") and method not in GRADIENT_METHODS:
+        raise SystemExit(f"bench: unknown gradient method {method!r}; valid: " + ", ".join(GRADIENT_METHODS)
+                         + " (or GUIDE/gpt:KEY=VALUE,...)")
+    args = render_args(method)
+    integ = make_integrator(args.get("integrator", "path"))
+    name = args.get("guide", "bsdf")
+    integ.check_guide(make_guide(name, **(args.get("guide_settings") or {})), name)
