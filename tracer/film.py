@@ -103,10 +103,17 @@ def aovs_of(films):
 
 
 def combine_films(films, kinds=None):
-    """One image from independent renders of the same pixels: weighted by the inverse of each
-    film's mean pixel variance (Mueller 2019), films with fewer than 2 spp in some pixel left out
-    unless nothing else has samples. Films of kind "discard" never count (e.g. ODIS's initial
-    pass, rendered at another depth). Returns (image (H,W,3), variance of it, weights)."""
+    """One image from independent renders of the same pixels, weighted by the inverse of each
+    film's mean pixel variance (Mueller 2019), with the weights of a pixel taken from the other
+    half of the pixels: pixels split as a checkerboard, the films of a white pixel are weighted by
+    their mean variance over the black pixels and the other way round. A pixel's own samples then
+    never enter its weights; weights from a film's own variance favour the films whose samples
+    happened to fall low (a high sample raises a film's mean and its variance together), which
+    darkened guided renders 3% (NEE on) and 20-66% (NEE off) on `ajar` (docs/findings.md).
+    Films with fewer than 2 spp in some pixel are left out unless nothing else has samples; films of
+    kind "discard" never count (e.g. ODIS's initial pass, rendered at another depth), "pilot" films
+    only when nothing else is usable. Returns (image (H,W,3), variance of it, weights: per film,
+    the mean of its two halves' weights)."""
     kinds = kinds or ["final"] * len(films)
     keep = [i for i, k in enumerate(kinds) if k != "discard"]
     if len(keep) < len(films):
@@ -125,33 +132,34 @@ def combine_films(films, kinds=None):
             total.sum += f.sum
             total.sumsq += f.sumsq
         return total.mean(), total.variance(), [1.0 if f.count.max() > 0 else 0.0 for f in films]
-    weights = []
-    last = None  # the last film's variance: the result's when it is the only film used
-    for f, ok, kind in zip(films, usable, kinds):
-        if not ok or (kind == "pilot" and sum(usable) > 1):
-            weights.append(0.0)
-            continue
-        last = (f, f.variance())
-        mv = float(last[1].mean())
-        weights.append(1.0 / mv if mv > 0 else math.inf)
-    used = [f for f, x in zip(films, weights) if x > 0.0]
-    w = np.array([x for x in weights if x > 0.0])
-    if np.isinf(w).any():  # noiseless films (a black image): by samples instead
-        w = np.array([float(f.count.sum()) for f in used])
-    w = w / w.sum()
+    used = [f for f, ok, kind in zip(films, usable, kinds) if ok and not (kind == "pilot" and sum(usable) > 1)]
     if len(used) == 1:
-        image = used[0].mean()
-        variance = last[1] if last is not None and last[0] is used[0] else used[0].variance()
-    else:  # one film's mean and variance at a time, computed again rather than all of them held
-        # (the same sums, in the same order, as a sum())
-        last = None
-        shape = (used[0].height, used[0].width, 3)
-        image, variance = np.zeros(shape), np.zeros(shape)
-        for wi, f in zip(w, used):
-            image += wi * f.mean()
-            variance += wi * wi * f.variance()
-    it = iter(w)
-    return image, variance, [float(next(it)) if x > 0.0 else 0.0 for x in weights]
+        f = used[0]
+        return f.mean(), f.variance(), [1.0 if g is f else 0.0 for g in films]
+    h, w = used[0].height, used[0].width
+    white = (np.add.outer(np.arange(h), np.arange(w)) % 2).astype(bool)
+    halves = (white, ~white) if white.any() and (~white).any() else (white | True, white | True)
+    # mv[k, q]: film k's mean pixel variance over half q; the pixels of half q take 1 / mv[k, 1 - q]
+    mv = np.empty((len(used), 2))
+    for k, f in enumerate(used):  # one film's variance at a time (memory), computed again below
+        v = f.variance()
+        mv[k] = [v[halves[0]].mean(), v[halves[1]].mean()]
+    wq = np.empty((len(used), 2))
+    for q in range(2):
+        other = mv[:, 1 - q]
+        if np.all(other > 0):
+            wq[:, q] = 1.0 / other
+        else:  # noiseless films (a black image): by samples instead
+            wq[:, q] = [float(f.count.sum()) for f in used]
+        wq[:, q] /= wq[:, q].sum()
+    shape = (h, w, 3)
+    image, variance = np.zeros(shape), np.zeros(shape)
+    for k, f in enumerate(used):
+        wmap = np.where(halves[0], wq[k, 0], wq[k, 1])[:, :, None]
+        image += wmap * f.mean()
+        variance += wmap * wmap * f.variance()
+    mean_w = {id(f): float(wq[k].mean()) for k, f in enumerate(used)}
+    return image, variance, [mean_w.get(id(f), 0.0) for f in films]
 
 
 def _check_pixels(pixel, n):
