@@ -72,7 +72,7 @@ def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
     image = None
     if images:
         os.makedirs(images, exist_ok=True)
-        tag = method.replace(":", "_").replace(",", "_").replace("=", "-")
+        tag = method.replace(":", "_").replace(",", "_").replace("=", "-").replace("/", "+")
         image = f"{tag}_{'t%g' % time_budget if time_budget else 'spp%d' % spp}_s{seed}.npy"
         atomic.save_npy(os.path.join(images, image), r.image.astype(np.float32))
     learning = s.get("guide_time_learning", 0.0)
