@@ -4,14 +4,14 @@ For scene `seed`:
 1. An initial pass of n0 spp (drawn from INITIAL_SPP) of camera paths with max_depth
    `initial_depth` (3, as the guide renders it; 0: no limit), the first hits' directions, what
    came back (with depth 3: direct plus one-bounce light), both hits' depth and normal
-   (tracer.guiding.odis_input.initial_samples).
+   (tracer.guiding.odis.features.initial_samples).
 2. `centres` film pixels drawn among those whose own first hits all lie on one plane (normals
    within 1e-3), each gathered into its 32 x 32 map with the guide's window for n0 (odis_input.gather).
 3. Ground truth at each centre, at the first hit of one of its own initial samples: `per_bin`
    probe rays in every bin above the surface, stratified inside the bin, each a path of
    max_depth initial_depth - 1 from that point (with 2: its first hit's emission plus the light
    it receives directly, i.e. direct plus one-bounce light seen from the centre), through
-   tracer.guiding.odis.reference_maps; the bin's value is the mean luminance. Bins below the
+   tracer.guiding.odis.guide.reference_maps; the bin's value is the mean luminance. Bins below the
    surface are 0.
 
 A shard holds feats (m, 9, 32, 32) float16, sampled and valid (m, 32, 32) uint8, gt (m, 32, 32)
@@ -45,8 +45,8 @@ def shard_arrays(scene, seed, c):
     import numba
 
     from tracer.film import Film
-    from tracer.guiding.odis import LARGE_K, SMALL_K, pixel_normals, reference_maps
-    from tracer.guiding.odis_input import first_sample, gather, initial_samples
+    from tracer.guiding.odis.guide import LARGE_K, SMALL_K, pixel_normals, reference_maps
+    from tracer.guiding.odis.features import first_sample, gather, initial_samples
     from tracer.render import make_context
     from tracer.session import trace_source
     from tracer.sources import CameraSource

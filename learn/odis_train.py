@@ -1,4 +1,4 @@
-"""Training and export of the ODIS network (tracer.guiding.odis_net).
+"""Training and export of the ODIS network (tracer.guiding.odis.net).
 
 Loss (`loss`): `l1`, section 4.2 without the GAN term: the L1 distance between the network's output
 and the reference map, both range-compressed (odis_net.target: the reference over its mean on the
@@ -25,9 +25,9 @@ import time
 import numpy as np
 import torch
 
-from tracer.guiding import odis_net
-from tracer.guiding.odis_input import bin_points
-from tracer.guiding.odis_net import OdisUNet, features, target
+from tracer.guiding.odis import net as odis_net
+from tracer.guiding.odis.features import bin_points
+from tracer.guiding.odis.net import OdisUNet, features, target
 
 from .odis_data import DEFAULTS as DATA_DEFAULTS
 from .odis_data import load_shards

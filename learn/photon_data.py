@@ -34,8 +34,8 @@ DEFAULTS = dict(width=64, height=64, n0=400, t_max=12, n_gt=12_000_000, max_voxe
 
 
 def _trace_into(ctx, gs, node_slot, n, key, power, count, node_count):
-    from tracer.guiding.photons import trace_photons
-    from tracer.guiding.spatial import accumulate
+    from tracer.guiding.grid.photons import trace_photons
+    from tracer.guiding.grid.spatial import accumulate
 
     def sink(node, b, v, x, nrm):  # node, b int64 and v float64 already (PhotonBuffers)
         accumulate(node, b, v, node_slot, power, count, node_count)

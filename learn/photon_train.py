@@ -1,4 +1,4 @@
-"""Training, export and evaluation of the photon map network (tracer.guiding.photon_cnn).
+"""Training, export and evaluation of the photon map network (tracer.guiding.grid.photon_cnn).
 
 Loss (section 6.1): the asymmetric L1 of equation 13, |S_d - S~| (1 + (lambda - 1) H), H = 1
 where the output and the input S_t lie on different sides of the ground truth, on every decoder
@@ -20,9 +20,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from tracer.guiding import photon_cnn
-from tracer.guiding.photon_cnn import PhotonUNet, features
-from tracer.guiding.reconstruct import make_reconstructor
+from tracer.guiding.grid import photon_cnn
+from tracer.guiding.grid.photon_cnn import PhotonUNet, features
+from tracer.guiding.grid.reconstruct import make_reconstructor
 from tracer.imageio import replace_atomically
 
 from .photon_data import DEFAULTS as DATA_DEFAULTS

@@ -4,6 +4,7 @@ import json
 import numpy as np
 
 import tracer
+import tracer.readers.obj
 from bench import scenes, throughput
 
 
@@ -15,7 +16,7 @@ def test_open_scene_files(tmp_path, monkeypatch):
     spec = scenes.open_scene(1)
     scene = tracer.load_scene(spec["obj"], width=24, height=24)
     assert scene.n_triangles == 84
-    parts = [tracer.scene.read_geometry(p)[0] for p, _, _ in spec["parts"]]
+    parts = [tracer.readers.obj.read_geometry(p)[0] for p, _, _ in spec["parts"]]
     # the scene's material groups come in reverse order of first use (tracer.objread)
     np.testing.assert_array_equal(np.concatenate(parts[::-1]), scene.tri)
     light = scene.tri[scene.emissive]

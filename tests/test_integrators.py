@@ -45,7 +45,8 @@ def test_unknown_integrators_and_settings_name_the_valid_ones():
         make_integrator("gpt:nee=0")
     scene = _scene("cornell", 8, 8)
     with pytest.raises(SettingsError, match="the hybrid shift samples the BSDF only"):
-        tracer.render(scene, spp=1, integrator="gpt", guide="photon")
+        tracer.render(scene, spp=1, integrator="gpt:shift=hybrid", guide="photon")
+    assert tracer.render(scene, spp=2, integrator="gpt", guide="grid").stats["shift"] == "replay"  # the default with a guide
     with pytest.raises(SettingsError, match="warps them"):
         tracer.render(scene, spp=1, integrator="gpt:shift=replay", guide="pss")
     with pytest.raises(SettingsError, match="has no setting 'shift'"):
@@ -127,7 +128,7 @@ def test_guided_gpt_image_mean_is_the_path_tracers():
 def test_cli_runs_guided_gpt_and_lists_integrators(capsys, tmp_path):
     out = tmp_path / "g.exr"
     code, _, err = run_cli(capsys, os.path.join(ROOT, "scenes", "cornell", "cornell.obj"), "--width", "12",
-                           "--height", "12", "--spp", "8", "--integrator", "gpt:shift=replay", "--guide",
+                           "--height", "12", "--spp", "8", "--integrator", "gpt", "--guide",
                            "photon:iterations=1", "-q", "-o", str(out))
     assert code == 0, err
     st = json.loads((tmp_path / "g.json").read_text())
@@ -137,5 +138,5 @@ def test_cli_runs_guided_gpt_and_lists_integrators(capsys, tmp_path):
     assert code == 0 and "gpt:" in text and "path:" in text and "nee = 1" in text and "shift = hybrid" in text
     fails_with(capsys, [os.path.join(ROOT, "scenes", "cornell", "cornell.obj"), "--integrator", "path:recon=l1"],
                "integrator 'path' has no setting 'recon'")
-    fails_with(capsys, [os.path.join(ROOT, "scenes", "cornell", "cornell.obj"), "--integrator", "gpt",
+    fails_with(capsys, [os.path.join(ROOT, "scenes", "cornell", "cornell.obj"), "--integrator", "gpt:shift=hybrid",
                         "--guide", "grid"], "use gpt:shift=replay")

@@ -1,5 +1,5 @@
 """The parallel OBJ reader (tracer.objread) against its slow twin, the line-by-line check plus
-trimesh (tracer.scene.scan_obj and _load_geometry), and its number parser against Python's
+trimesh (tracer.readers.obj.scan_obj and _load_geometry), and its number parser against Python's
 float(). The twin comparison can detect a triangle out of order, a wrong triangulation, a
 material group in the wrong place, a vertex off by one ulp, or a wrong mtllib/usemtl list."""
 import glob
@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from tracer import scene as S
+from tracer.readers import obj as O
 from tracer.errors import SceneError
 from tracer.objread import read_obj, triangle_areas
 
@@ -18,8 +19,8 @@ SHARED = sorted(glob.glob(os.path.join(ROOT, "..", "shared", "scenes", "*", "*.o
 
 
 def _slow(path):
-    scan = S.scan_obj(path)
-    tri, groups = S._load_geometry(path, scan)
+    scan = O.scan_obj(path)
+    tri, groups = O._load_geometry(path, scan)
     return tri, groups, scan.mtllibs, scan.usemtl
 
 

@@ -12,7 +12,7 @@ from tracer.camera import camera_ray
 from tracer.film import Film, SampleSink
 from tracer.guiding.base import Guide
 from tracer.guiding.directional import build_tables
-from tracer.guiding.spatial import empty_state
+from tracer.guiding.contract import empty_state
 from tracer.render import make_context
 from tracer.rng import BLOCK, BOUNCE, DIR, path_key, pss_dims, uniform_batch
 from tracer.session import trace_source
@@ -307,3 +307,75 @@ def test_pss_dims_follow_the_dimension_table():
                                     BOUNCE + BLOCK + DIR + 1]
     with pytest.raises(ValueError):
         pss_dims(-1)
+
+
+def _names(bundle, prefix="", special=None):
+    special = special or {}
+    return [special.get(f, prefix + f) for f in bundle._fields]
+
+
+def test_kernel_parameters_follow_their_bundles():
+    """Call sites splat the bundles declared once in wave.py, context.py, records.py and
+    gradient/offsets.py into kernels that take the arrays one by one (see the next test). Each
+    kernel's parameter names must run in the bundles' field order, so that two fields swapped in
+    a signature (which would compile and run) fail here."""
+    import inspect
+
+    from tracer.context import Surfaces
+    from tracer.gradient.offset_shading import add_next_event, shade_hybrid
+    from tracer.gradient.offsets import BaseBounce, NeeTerms, Offsets, shift_offsets, start_offsets
+    from tracer.guiding.records import Records
+    from tracer.integrators.path import shade
+    from tracer.wave import Continuation, PathState, ShadowQueue, ShadowRays, compact
+
+    surf = _names(Surfaces, special={"normal": "tri_normal", "material": "tri_material", "eps": "tri_eps"})
+    shadow = _names(ShadowRays, "sh_", {"has": "has_shadow"})
+    offsets = _names(Offsets, "o_", {f: f for f in ("G", "hit_t", "hit_prim", "hit_b1", "hit_b2")})
+    nee = _names(NeeTerms, "n_", {"vis_b": "vis_b", "vis": "vis"})
+    expected = {
+        shade: [surf, _names(PathState), _names(Continuation), shadow, _names(Records, "r_")],
+        compact: [_names(Continuation), shadow, _names(ShadowQueue, "sp_")],
+        shade_hybrid: [surf, _names(PathState), _names(Continuation), shadow, _names(BaseBounce, "b_"), offsets, nee],
+        shift_offsets: [surf, _names(BaseBounce, "b_"), offsets],
+        start_offsets: [offsets],
+        add_next_event: [shadow, nee],
+    }
+    for kernel, runs in expected.items():
+        params = list(inspect.signature(kernel.py_func).parameters)
+        for run in runs:
+            assert any(params[i:i + len(run)] == run for i in range(len(params))), (kernel.py_func.__name__, run)
+
+
+def test_numba_loses_parallel_writes_into_arrays_that_arrive_in_a_tuple():
+    """Why the kernels take arrays one by one: on the pinned Numba, a parallel loop's writes at
+    its own index into arrays unpacked from a NamedTuple argument are lost, while the same kernel
+    with the arrays as arguments keeps them. If this fails, a Numba release fixed it, and the
+    kernels could take their bundles whole."""
+    from typing import NamedTuple
+
+    from numba import njit, prange
+
+    class Pair(NamedTuple):
+        beta: np.ndarray
+        alive: np.ndarray
+
+    @njit(parallel=True, cache=False)
+    def through_tuple(active, pair):
+        beta, alive = pair
+        for k in prange(active.shape[0]):
+            beta[active[k], 0] = 2.0
+            alive[k] = True
+
+    @njit(parallel=True, cache=False)
+    def one_by_one(active, beta, alive):
+        for k in prange(active.shape[0]):
+            beta[active[k], 0] = 2.0
+            alive[k] = True
+
+    active = np.arange(0, 1000, 2)
+    a = Pair(np.zeros((1000, 3)), np.zeros(1000, np.bool_))
+    b = Pair(np.zeros((1000, 3)), np.zeros(1000, np.bool_))
+    through_tuple(active, a)
+    one_by_one(active, *b)
+    assert b.alive.sum() == 500 and b.beta[:, 0].sum() == 1000.0
+    assert a.alive.sum() < 500, "Numba kept the writes through the tuple: the kernels could take bundles whole"

@@ -44,6 +44,28 @@ class Camera:
         tan_x, tan_y = (t, t / aspect) if fov_axis == "x" else (t * aspect, t)
         return Camera(o, f, r, u, tan_x, tan_y, float(fov), fov_axis)
 
+    @staticmethod
+    def from_matrix(matrix, fov, fov_axis, width, height, where="camera"):
+        """The camera of a 4x4 camera-to-world matrix in Mitsuba's convention (toWorld): the
+        camera at the image of the origin, looking along the image of +z, +y up on screen, +x to
+        the image's left (a matrix that mirrors x mirrors the image, as in Mitsuba). Its rotation
+        part may be scaled; it must not be singular."""
+        m = np.asarray(matrix, dtype=np.float64)
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+            raise SceneError(f"{where}: expected a finite 4x4 camera-to-world matrix")
+        cols = [m[:3, j] for j in range(3)]
+        norms = [float(np.linalg.norm(c)) for c in cols]
+        if min(norms) < 1e-12 or abs(np.linalg.det(m[:3, :3])) < 1e-12 * norms[0] * norms[1] * norms[2]:
+            raise SceneError(f"{where}: the camera-to-world matrix is singular")
+        f = cols[2] / norms[2]
+        u = cols[1] - np.dot(cols[1], f) * f
+        if np.linalg.norm(u) < 1e-12:
+            raise SceneError(f"{where}: the camera's up (+y) is parallel to its viewing direction (+z)")
+        cam = Camera.look_at(m[:3, 3], m[:3, 3] + f, u, fov, fov_axis, width, height, where=where)
+        if np.dot(cam.right, cols[0]) > 0.0:  # a mirrored frame: the image's right is the frame's -x still
+            cam = Camera(cam.origin, cam.forward, -cam.right, cam.up, cam.tan_x, cam.tan_y, cam.fov, cam.fov_axis)
+        return cam
+
     def resized(self, width, height):
         """The same view at another resolution (keeps the fov along fov_axis)."""
         t = self.tan_x if self.fov_axis == "x" else self.tan_y

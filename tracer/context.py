@@ -9,7 +9,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .bvh import ray_offsets
-from .guiding.spatial import empty_state
+from .guiding.contract import empty_state
 
 
 class Surfaces(NamedTuple):

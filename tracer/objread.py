@@ -11,7 +11,7 @@ as fans), so that the scene, and every image rendered from it, is the same which
 It returns None where it cannot promise that: another statement, a negative index, a vertex
 line that is not three plain numbers, a face line it cannot parse or with an index that is not
 yet defined, a group of polygons of one size above four, or text that is not UTF-8. The caller
-then goes the slow way (tracer.scene: a line-by-line check that names the bad line, and trimesh).
+then goes the slow way (tracer.readers.obj: a line-by-line check that names the bad line, and trimesh).
 
 Numbers are parsed exactly: a decimal with at most 18 significant digits and a power of ten
 within 10^+-22 is m * 10^e or m / 10^-e in one correctly rounded float64 operation (Clinger's
@@ -339,7 +339,7 @@ def read_obj(data):
     for ln in mlines:
         name = data[starts[ln] + 6 : ends[ln]].decode("utf-8").strip()
         if not name or name != " ".join(name.split()):
-            return None  # trimesh and tracer.scene would name it differently
+            return None  # trimesh and tracer.readers.obj would name it differently
         names.append(name)
     for ln in mtl_lines:
         mtllibs.extend(data[starts[ln] + 6 : ends[ln]].decode("utf-8").split())

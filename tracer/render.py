@@ -88,8 +88,8 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                "path:nee=0" without next-event estimation) or "gpt" (gradient-domain path tracing,
                tracer.gradient), e.g. "gpt:shift=replay,recon=l1"; integrator_settings: a dict of
                its settings (an Integrator object is accepted too). gpt's settings: shift "hybrid"
-               (reconnecting vertices rougher than `roughness`; BSDF sampling only) or "replay"
-               (works with the guides that sample bounces: grid, photon, odis); recon "l2" (the
+               (reconnecting vertices rougher than `roughness`; BSDF sampling only; the default
+               without a guide) or "replay" (the default with a guide: grid, photon, odis); recon "l2" (the
                default) or "l1" (screened Poisson, with weight recon_alpha on the base; l1 is
                darker at low spp), "gradnet" (the learned reconstruction; `weights`, the name of
                shipped weights, `correction` 0 or 1) or "none" (the base image); nee 0 or 1. The
@@ -103,7 +103,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
 
     The method runs its own schedule of passes (guide.schedule(session), tracer.session): BSDF
     sampling and guides that learn nothing render final passes alone; `grid` and `photon` run
-    Algorithm 1 of Zhu et al. 2021 (tracer.guiding.schedule): a 1-spp pilot, training iterations
+    Algorithm 1 of Zhu et al. 2021 (tracer.guiding.grid.schedule): a 1-spp pilot, training iterations
     of 2^t spp, then final guided passes; the image combines the films of the passes weighted by
     the inverse of each one's mean pixel variance (the pilot is not used).
 

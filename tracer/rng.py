@@ -3,7 +3,7 @@
 There is no generator state. Each path keeps one 64-bit key, `path_key(seed, pixel, sample)`,
 and draws dimension d as `uniform(key, d)`. A render is therefore the same whatever the batch
 size, wave size or thread count, and any path can be replayed (gradient-domain random replay,
-PSS warps that replace the first dimensions of the stream, `--pixel` debugging).
+PSS warps that replace the first dimensions of the stream).
 
 The dimension layout is this table, and nothing else in the code hard-codes a dimension:
 

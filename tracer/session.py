@@ -208,7 +208,7 @@ class Session:
         last pass, or 1), up to `spp` in all; or, with a time budget, each at most what the time
         left holds at the final passes' speed so far (rounded up), until the budget ends, the last
         pass cut at the deadline (run_pass). split: a splitting.SplitPlan; source: where the paths
-        start (default: the camera; e.g. a guiding.pss.WarpSource)."""
+        start (default: the camera; e.g. a guiding.pss.warp.WarpSource)."""
         it = self.integrator
         film = it.final_film(self)
         if not any(f is film for f, _ in self.films):

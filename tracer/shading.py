@@ -13,19 +13,37 @@ guide mixture exist once:
 Conventions: directions are unit 3-tuples; `wo`, `wi` in the local shading frame (s, t, n) of
 tracer.sampling.frame unless named `*w` (world); densities are per unit solid angle; colours are
 RGB 3-tuples. `a` is the probability of BSDF sampling in the mixture p = a p_bsdf + (1 - a) p_guide
-(1: no guide at this vertex), `slot` the guide's sampling map there (tracer.guiding.spatial.locate).
+(1: no guide at this vertex), `slot` the guide's sampling map there (tracer.guiding.contract.locate).
 """
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from . import bsdfs
 from ._jit import jit
-from .guiding.spatial import slot_pdf, slot_sample
+from .guiding.contract import slot_pdf, slot_sample
 from .lights import env_pdf, env_radiance, sample_light, triangle_emission, triangle_light_pdf
 from .sampling import dot, power_heuristic, to_local, to_world
 
 BLACK = (0.0, 0.0, 0.0)
+
+
+class LightSample(NamedTuple):
+    """What light_sample_at returns: NEE's shadow ray and value, and the light sample itself."""
+
+    ok: bool  # a shadow ray to trace
+    origin: tuple  # its origin, unit direction and length
+    direction: tuple
+    tmax: float
+    contrib: tuple  # what it adds if unblocked: beta f le w / pl (RGB)
+    wl: tuple  # unit world direction to the light sample
+    dist: float  # its distance (inf: the environment)
+    le: tuple  # its emitted radiance (RGB)
+    pl: float  # its solid-angle density (0: no sample)
+    tri: int  # its triangle (-1: the environment)
+    f: tuple  # f |cos| toward it (RGB)
+    pdf: float  # the mixture density of wl
 
 
 @jit
@@ -130,18 +148,16 @@ def next_event(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot,
     the power heuristic against the mixture density of the same direction. Returns (ok, origin,
     unit direction, tmax, contribution beta f le w / p_light): the shadow ray to trace, and what it
     adds if unblocked. ok is False where nothing is to be traced."""
-    ok, so, sd, tmax, contrib, _, _, _, _, _, _, _ = light_sample_at(
-        mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1)
-    return ok, so, sd, tmax, contrib
+    ls = light_sample_at(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot, a, eps, tri_eps, u_light,
+                         u_pos0, u_pos1)
+    return ls.ok, ls.origin, ls.direction, ls.tmax, ls.contrib
 
 
 @jit(inline="always")
 def light_sample_at(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot, a, eps, tri_eps, u_light,
                     u_pos0, u_pos1):
-    """next_event with the light sample itself: (ok, origin, direction, tmax, contribution, wl (unit
-    world direction), dist (inf: the environment), le, pl (solid-angle density, 0: no sample),
-    lt_tri (-1: the environment), f (f |cos|), pb (the mixture density of wl)). The gradient-domain
-    tracer shifts this sample to its offset paths."""
+    """next_event with the light sample itself, as a LightSample. The gradient-domain tracer shifts
+    this sample to its offset paths."""
     wl, dist, le, pl, lt_tri = sample_light(lt, tri, x, u_light, u_pos0, u_pos1)
     ok = False
     so = x
@@ -161,7 +177,7 @@ def light_sample_at(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, 
                 ok = True
                 contrib = (beta[0] * f[0] * le[0] * w / pl, beta[1] * f[1] * le[1] * w / pl,
                            beta[2] * f[2] * le[2] * w / pl)
-    return ok, so, sd, tmax, contrib, wl, dist, le, pl, lt_tri, f, pb
+    return LightSample(ok, so, sd, tmax, contrib, wl, dist, le, pl, lt_tri, f, pb)
 
 
 @jit(inline="always")

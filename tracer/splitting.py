@@ -32,7 +32,7 @@ from numba import prange
 from ._jit import jit, kernel
 from .errors import SettingsError
 from .film import combine_films
-from .guiding.spatial import find_voxel
+from .guiding.contract import find_voxel
 from .rng import split_key, uniform
 from .sampling import triangle_point
 

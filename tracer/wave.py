@@ -11,6 +11,7 @@ rays of a bounce are per entry.
 """
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 from numba import prange
@@ -22,12 +23,64 @@ from .guiding.records import Records
 _CHUNKS = 64  # compaction splits a batch into this many chunks, counted then written in parallel
 
 
+# The bundles of a wave's arrays, each declared once: WaveBuffers.path_state(), .continuation(),
+# .shadow_rays(), .shadow_queue(). A call site splats them (`*buf.path_state()`) into a kernel
+# whose parameters list the fields in the same order: Numba 0.68 loses writes inside a parallel
+# loop into arrays that arrive in a tuple, even when the tuple is unpacked before the loop
+# (docs/findings.md), so kernels take the arrays one by one. tests/test_seams.py checks each
+# kernel's parameter names against the bundles it takes.
+class PathState(NamedTuple):
+    """Per path slot i: what a path carries from bounce to bounce."""
+
+    beta: np.ndarray  # (n, 3) float64 throughput
+    L: np.ndarray  # (n, 3) float64 radiance so far
+    L_cam: np.ndarray  # (n, 3) float64 the light the camera ray sees directly (the first hit's emission)
+    depth: np.ndarray  # (n,) int32 bounces so far
+    prev_pdf: np.ndarray  # (n,) float64 solid-angle density of the last sampled direction
+    prev_delta: np.ndarray  # (n,) bool the last direction came from a delta lobe (or the camera)
+    gain: np.ndarray  # (n,) float64 product of p_bsdf / p_mixture along the path
+    key: np.ndarray  # (n,) uint64 the path's random stream
+    pix: np.ndarray  # (n,) int64 film pixel (-1: none)
+    aov: np.ndarray  # (n, N_AOV) float64
+    aov_open: np.ndarray  # (n,) bool the albedo AOV waits for a non-delta vertex
+    prev_rec: np.ndarray  # (n,) int64 record of the path's last vertex (-1: none)
+
+
+class Continuation(NamedTuple):
+    """Per entry k of a bounce: the path goes on (alive) along the ray next_o, next_d."""
+
+    alive: np.ndarray  # (m,) bool
+    next_o: np.ndarray  # (m, 3) float64
+    next_d: np.ndarray  # (m, 3) float64
+
+
+class ShadowRays(NamedTuple):
+    """Per entry k of a bounce: a shadow ray (has) from o along unit d up to tmax, adding L if unblocked."""
+
+    o: np.ndarray  # (m, 3) float64
+    d: np.ndarray  # (m, 3) float64
+    tmax: np.ndarray  # (m,) float64
+    L: np.ndarray  # (m, 3) float64
+    has: np.ndarray  # (m,) bool
+
+
+class ShadowQueue(NamedTuple):
+    """The shadow rays of a bounce packed to the front: path slot, entry, ray and value."""
+
+    path: np.ndarray  # (m,) int64
+    entry: np.ndarray  # (m,) int64
+    o: np.ndarray  # (m, 3) float64
+    d: np.ndarray  # (m, 3) float64
+    tmax: np.ndarray  # (m,) float64
+    L: np.ndarray  # (m, 3) float64
+
+
 @kernel
-def compact(active, alive, next_o, next_d, has_shadow, sh_o, sh_d, sh_tmax, sh_L,
+def compact(active, alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
             dst_active, dst_o, dst_d, sp_path, sp_entry, sp_o, sp_d, sp_tmax, sp_L):
-    """Pack the continuing paths (alive) and the shadow rays (has_shadow) to the front of the
-    dst_* and sp_* arrays, keeping their order (sp_entry: the entry k a shadow ray came from).
-    Returns (continuing, shadow rays).
+    """Pack the continuing paths (alive: a Continuation) to the front of dst_active, dst_o, dst_d
+    and the shadow rays (has_shadow: ShadowRays) to the front of the ShadowQueue sp_*, keeping
+    their order (sp_entry: the entry k a shadow ray came from). Returns (continuing, shadow rays).
 
     Two parallel passes over chunks: count per chunk, then write at the prefix-sum offsets.
     """
@@ -143,6 +196,19 @@ class WaveBuffers:
         b1, b2 = (sum(a.nbytes for a in vars(WaveBuffers(k, split)).values() if isinstance(a, np.ndarray))
                   for k in (1, 2))
         return b1 + (b2 - b1) * (size - 1)
+
+    def path_state(self):
+        return PathState(self.beta, self.L, self.L_cam, self.depth, self.prev_pdf, self.prev_delta, self.gain,
+                         self.key, self.pix, self.aov, self.aov_open, self.prev_rec)
+
+    def continuation(self):
+        return Continuation(self.alive, self.next_o, self.next_d)
+
+    def shadow_rays(self):
+        return ShadowRays(self.sh_o, self.sh_d, self.sh_tmax, self.sh_L, self.has_shadow)
+
+    def shadow_queue(self):
+        return ShadowQueue(self.sp_path, self.sp_entry, self.sp_o, self.sp_d, self.sp_tmax, self.sp_L)
 
     def copy_hits(self, *hits):
         """Arrays with room for `capacity` entries, of the dtypes of `hits` (t, prim, b1, b2): where

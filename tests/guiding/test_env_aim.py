@@ -7,7 +7,7 @@ import numpy as np
 import tracer
 from tests.scenes import sphere_under_sky
 from tracer.guiding import make_guide
-from tracer.guiding.photons import PhotonBuffers, emit, env_aim, no_aim
+from tracer.guiding.grid.photons import PhotonBuffers, emit, env_aim, no_aim
 from tracer.lights import build_lights
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

@@ -288,7 +288,7 @@ def test_guided_light_tracing_keeps_the_expected_photon_power_per_voxel():
     # With light_guiding, a photon samples its voxel's importance map or its BSDF and carries
     # f |cos| / (mixture pdf): each voxel's expected deposited power must be what unguided light
     # tracing deposits. Same grid for both; batches of photons give the variances of the means.
-    from tracer.guiding.photons import trace_photons
+    from tracer.guiding.grid.photons import trace_photons
 
     g = make_guide("photon", light_guiding=0.5)
     tracer.render(_scene("cornell", 32, 32), spp=16, guide=g, seed=5)
@@ -371,7 +371,7 @@ def test_outgoing_radiance_per_voxel_is_the_mean_of_what_arrivals_collected():
     """A record's vertex sent back what its path's previous record received: per leaf, outgoing()
     is the mean of those, over leaves with enough of them; halves go to both children on a split."""
     from tracer.guiding.records import Records
-    from tracer.guiding.spatial import HierarchicalGrid
+    from tracer.guiding.grid.spatial import HierarchicalGrid
     from tracer.splitting import OUT_MIN_SAMPLES, observe_outgoing, outgoing
 
     g = HierarchicalGrid(np.zeros(3), np.ones(3), 1, 4, 8, 1)

@@ -1,4 +1,4 @@
-"""Directional maps, their alias tables, the reconstruction filters and the hierarchical grid."""
+"""Directional maps, their sampling tables, the reconstruction filters and the hierarchical grid."""
 import math
 
 import numpy as np
@@ -8,8 +8,8 @@ from tracer.testing.chi2 import histogram_test
 from tracer.testing.stats import assert_z
 from tracer.errors import SettingsError
 from tracer.guiding.directional import bin_of_batch, build_tables, map_pdf_batch, map_sample_batch, probabilities
-from tracer.guiding.reconstruct import make_reconstructor
-from tracer.guiding.spatial import HierarchicalGrid
+from tracer.guiding.grid.reconstruct import make_reconstructor
+from tracer.guiding.grid.spatial import HierarchicalGrid
 
 H, W = 8, 16
 

@@ -4,7 +4,7 @@ import pytest
 
 from tracer.errors import SettingsError
 from tracer.guiding import make_guide
-from tracer.guiding.histogram import N_ALPHA, _mix_moments
+from tracer.guiding.grid.guides import N_ALPHA, _mix_moments
 from tracer.testing import z_critical
 
 CAND = np.linspace(0.2, 0.8, N_ALPHA)

@@ -31,7 +31,7 @@ from tracer.testing.chi2 import ChiSquareTest
 from tracer.testing.stats import assert_clean, assert_z, image_mean
 from tracer.guiding import make_guide
 from tracer.guiding.directional import bin_of_batch
-from tracer.guiding.spatial import locate, slot_pdf, slot_sample
+from tracer.guiding.contract import locate, slot_pdf, slot_sample
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 H, W = 32, 32
@@ -118,7 +118,7 @@ def test_pixel_map_bins_are_drawn_with_their_probability():
 
 
 def _random_input(rng, m=6):
-    from tracer.guiding.odis_net import features
+    from tracer.guiding.odis.net import features
 
     feats = rng.gamma(0.5, 1.0, (m, 9, H, W)).astype(np.float32)
     sampled = (rng.random((m, H, W)) < 0.3).astype(np.uint8)
@@ -133,7 +133,7 @@ def _random_input(rng, m=6):
 def test_masked_bins_have_no_influence(model_kind):
     import torch
 
-    from tracer.guiding import odis_net
+    from tracer.guiding.odis import net as odis_net
 
     rng = np.random.default_rng(3)
     feats, sampled, valid, features = _random_input(rng)
@@ -154,7 +154,7 @@ def test_masked_bins_have_no_influence(model_kind):
 
 def test_shipped_weights_reproduce_the_manifest():
     from learn.odis_train import check_input
-    from tracer.guiding import odis_net
+    from tracer.guiding.odis import net as odis_net
 
     model, manifest = odis_net.load()
     x, v = check_input()
@@ -167,8 +167,8 @@ def test_shipped_weights_reproduce_the_manifest():
 @pytest.mark.parametrize("w,h,stride", [(11, 7, 4), (12, 3, 8), (5, 9, 16)])
 def test_pixel_maps_match_a_slow_twin(w, h, stride):
     from tracer.guiding.directional import build_tables
-    from tracer.guiding.odis import SAME_NORMAL, N_THETA, _pixel_maps, _pixel_tables, centre_axis
-    from tracer.guiding.odis_input import bin_points
+    from tracer.guiding.odis.guide import SAME_NORMAL, N_THETA, _pixel_maps, _pixel_tables, centre_axis
+    from tracer.guiding.odis.features import bin_points
 
     # (12, 3, 8): the last centre clipped to the film (x 4, 11) and one row of centres;
     # (5, 9, 16): one centre (the film is smaller than the stride)
@@ -302,7 +302,7 @@ def test_settings_are_checked():
 
 def test_ground_truth_in_an_emitting_black_box(tmp_path):
     from learn.odis_data import DEFAULTS, shard_arrays
-    from tracer.guiding.odis_input import bin_points
+    from tracer.guiding.odis.features import bin_points
 
     # Walls of albedo a = 1e-4 (a black wall samples no direction): from any point inside, every
     # direction above the surface sees Le, plus the one-bounce light a x Le (the whole enclosure

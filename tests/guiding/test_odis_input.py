@@ -1,4 +1,4 @@
-"""The ODIS input gather (tracer.guiding.odis_input) against a slow twin written here.
+"""The ODIS input gather (tracer.guiding.odis.features) against a slow twin written here.
 
 The twin loops in Python over the centre's window and its samples, bins each direction by its own
 z = cos(theta) and phi = atan2(y, x) formulas, and averages; the kernel must give the same means and
@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from tracer.guiding.odis_input import N_CHANNELS, gather
+from tracer.guiding.odis.features import N_CHANNELS, gather
 
 
 def _random_samples(rng, width, height, per_pixel):
@@ -87,7 +87,7 @@ def test_initial_samples_in_a_closed_box_match_the_geometry(tmp_path):
     import tracer
     from tests import scenes
     from tracer.film import Film
-    from tracer.guiding.odis_input import initial_samples
+    from tracer.guiding.odis.features import initial_samples
     from tracer.render import make_context
     from tracer.session import trace_source
     from tracer.sources import CameraSource

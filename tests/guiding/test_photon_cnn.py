@@ -1,4 +1,4 @@
-"""The photon map network (tracer.guiding.photon_cnn) and its shipped weights.
+"""The photon map network (tracer.guiding.grid.photon_cnn) and its shipped weights.
 
 - Masked convolution: the output's gradient with respect to every data channel is exactly zero
   at bins outside the mask B_t, and changing those values leaves the output bit-identical (detects
@@ -23,9 +23,9 @@ import torch
 from tracer.testing.chi2 import ChiSquareTest
 from tracer.errors import SettingsError
 from tracer.guiding import make_guide
-from tracer.guiding import photon_cnn
-from tracer.guiding.reconstruct import make_reconstructor
-from tracer.guiding.spatial import guide_pdf_batch, guide_sample_batch
+from tracer.guiding.grid import photon_cnn
+from tracer.guiding.grid.reconstruct import make_reconstructor
+from tracer.guiding.contract import guide_pdf_batch, guide_sample_batch
 
 DATA = os.path.join(os.path.dirname(os.path.dirname(__file__)), "data", "photon_maps_val.npz")
 H, W = 32, 64

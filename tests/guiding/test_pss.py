@@ -1,6 +1,6 @@
 """`--guide pss`: the Real NVP warp's contract, and renders that stay unbiased.
 
-The flow (tracer.guiding.pss_flow) is tested for every configuration the guide builds (image:
+The flow (tracer.guiding.pss.flow) is tested for every configuration the guide builds (image:
 4 or 6 dims; pixel: 2 or 4 dims with the pixel context) with weights moved off the identity:
 - forward then inverse returns the input, both ways (detects a wrong inverse coupling);
 - log q from `warp` equals minus the log-determinant of the autograd Jacobian of the whole map,
@@ -30,8 +30,8 @@ from tests import scenes
 from tracer.testing.stats import assert_clean, assert_z, image_mean
 from tracer.errors import SettingsError
 from tracer.guiding import make_guide
-from tracer.guiding import pss_flow as pf
-from tracer.guiding.pss import _CountingFilm
+from tracer.guiding.pss import flow as pf
+from tracer.guiding.pss.warp import _CountingFilm
 from tracer.render import make_context
 from tracer.rng import pss_dims
 from tracer.session import trace_source

@@ -54,7 +54,7 @@ def test_resume_export_and_render(shards, tmp_path):
     import torch
 
     from learn.odis_train import export, train
-    from tracer.guiding import odis_net
+    from tracer.guiding.odis import net as odis_net
 
     straight, resumed = str(tmp_path / "straight"), str(tmp_path / "resumed")
     s0 = train(_args(shards, straight, 2))

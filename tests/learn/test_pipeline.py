@@ -20,7 +20,7 @@ import tracer
 from learn import photon_data, scenes
 from learn.shards import list_shards, run_shards, shard_path
 from tracer.guiding import make_guide
-from tracer.guiding.reconstruct import CNN
+from tracer.guiding.grid.reconstruct import CNN
 
 TINY = dict(width=16, height=16, n0=30, t_max=3, n_gt=60_000, max_voxels=40, keep=16, gt_min=20, gt_ratio=2.0,
             r_min=6, r_max=12)

@@ -22,7 +22,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ..guiding.photon_cnn import WEIGHTS_DIR, count_flops, load_weights, parameter_count  # noqa: F401
+from ..nn import WEIGHTS_DIR, count_flops, load_weights, parameter_count  # noqa: F401
 
 MU = 16.0
 N_FEATURES = 7

@@ -62,32 +62,20 @@ def warm_up(ctx, buf, roughness):
     t, prim, b1, b2 = ctx.accel.intersect(buf.ray_o[:0], buf.ray_d[:0])
     surf = ctx.surfaces
     start_offsets(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, no_primary_samples(),
-                  buf.key[:0], buf.pix[:0], hb.ray_o, hb.ray_d, hb.alive, hb.status, hb.beta, hb.R, hb.wo, hb.hv,
-                  hb.trace, hb.reconn, hb.G)
-    shift_offsets(idx, t, prim, b1, b2, buf.ray_d[:0], surf.tri, surf.normal, surf.material, surf.eps,
-                  surf.mat_type, surf.mat_param, roughness, hb.b_x, hb.b_prim, hb.b_wo, hb.b_wt, hb.b_pdf,
-                  hb.b_delta, hb.b_rough, *hb.offset_state())
+                  buf.key[:0], buf.pix[:0], *hb.offsets())
+    shift_offsets(idx, t, prim, b1, b2, buf.ray_d[:0], *surf, roughness, *hb.base(), *hb.offsets())
     _shade(ctx, buf, hb, idx, buf.ray_d[:0], (t, prim, b1, b2), no_primary_samples(), roughness)
     _add_next_event(buf, hb, idx)
 
 
 def _shade(ctx, buf, hb, active, rd, hits, ps, roughness):
-    shade_hybrid(active, rd, *hits, *ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth,
-                 ctx.rr_depth, roughness, buf.beta, buf.L, buf.L_cam, buf.depth, buf.prev_pdf, buf.prev_delta,
-                 buf.key, buf.aov, buf.aov_open, buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d,
-                 buf.sh_tmax, buf.sh_L, buf.has_shadow, hb.b_x, hb.b_prim, hb.b_wo, hb.b_wt, hb.b_pdf,
-                 hb.b_delta, hb.b_rough, hb.G, hb.alive, hb.status, hb.beta, hb.R, hb.x, hb.prim,
-                 hb.wo, hb.pdf, hb.delta, hb.dist2, hb.rough, hb.hv, hb.lights, hb.trace, hb.hit_t, hb.hit_prim,
-                 hb.hit_b1, hb.hit_b2, hb.sh, hb.sh_o, hb.sh_d, hb.sh_tmax, *_nee(hb))
-
-
-def _nee(hb):
-    return hb.n_cn, hb.n_pl, hb.n_pb, hb.n_mode, hb.n_co, hb.n_rj, hb.n_plo, hb.n_pbo, hb.vis
+    shade_hybrid(active, rd, *hits, *ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth, ctx.rr_depth,
+                 roughness, *buf.path_state(), *buf.continuation(), *buf.shadow_rays(), *hb.base(), *hb.offsets(),
+                 *hb.nee_terms())
 
 
 def _add_next_event(buf, hb, active):
-    add_next_event(active, buf.has_shadow, hb.vis_b, buf.sh_L, buf.L, hb.G, hb.n_mode, hb.n_cn, hb.n_pl, hb.n_pb,
-                   hb.n_co, hb.n_rj, hb.n_plo, hb.n_pbo, hb.vis)
+    add_next_event(active, *buf.shadow_rays(), buf.L, hb.G, *hb.nee_terms())
 
 
 def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness):
@@ -97,7 +85,7 @@ def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness):
     t0 = _time.perf_counter()
     ps = _CAMERA.start(ctx, buf, sample0, g0, n)
     start_offsets(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, ps, buf.key[:n], buf.pix[:n],
-                  hb.ray_o, hb.ray_d, hb.alive, hb.status, hb.beta, hb.R, hb.wo, hb.hv, hb.trace, hb.reconn, hb.G)
+                  *hb.offsets())
     active = np.arange(n)
     surf = ctx.surfaces
     t0 = stats.tick("camera", t0)
@@ -110,9 +98,7 @@ def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness):
         stats.rays += na
         t0 = stats.tick("intersect", t0)
         if bounce > 0:
-            shift_offsets(active, t, prim, b1, b2, rd, surf.tri, surf.normal, surf.material, surf.eps, surf.mat_type,
-                          surf.mat_param, roughness, hb.b_x, hb.b_prim, hb.b_wo, hb.b_wt, hb.b_pdf, hb.b_delta,
-                          hb.b_rough, *hb.offset_state())
+            shift_offsets(active, t, prim, b1, b2, rd, *surf, roughness, *hb.base(), *hb.offsets())
             t0 = stats.tick("shift", t0)
         # The offsets' own rays, and the visibility of their reconnections
         pi, po = np.nonzero(hb.trace[active])

@@ -18,6 +18,11 @@ from ..shading import shadow_ray, write_aovs, write_shadow
 from .offsets import BLOCKED, CONNECTED, TRACED
 from .shift import is_rough, reconnection
 
+# NeeTerms.mode of an offset at a bounce: no NEE term; the base's own weighted value alone (no
+# partner path); the partner shares the base's shadow ray (the offset sits at the base's vertex);
+# the partner traces its own shadow ray
+NEE_NONE, NEE_BASE_ALONE, NEE_BASE_RAY, NEE_OWN_RAY = 0, 1, 2, 3
+
 
 @jit(inline="always")
 def _emitted_by(lt, tri_normal, q, wo, dist2, delta):
@@ -38,18 +43,22 @@ def _emitted_by(lt, tri_normal, q, wo, dist2, delta):
 @kernel
 def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, lt, gs,
                  ps, max_depth, rr_depth, roughness,
-                 beta, L, L_cam, depth, prev_pdf, prev_delta, key, aov, aov_open,
+                 beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open, prev_rec,
                  alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
-                 b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough, G,
+                 b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
                  o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights,
-                 o_trace, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o, o_sh_d, o_sh_tmax,
-                 n_cn, n_pl, n_pb, n_mode, n_co, n_rj, n_plo, n_pbo, vis):
+                 o_trace, o_reconn, o_ray_o, o_ray_d, o_tmax, G, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o,
+                 o_sh_d, o_sh_tmax,
+                 n_cn, n_pl, n_pb, vis_b, n_mode, n_co, n_rj, n_plo, n_pbo, vis):
     """One bounce of base and offset paths: the vertices the offsets reached, emission (the base's
     as the path tracer's, the gradients' with the pair weights), NEE shifted to the offsets, the
-    base's direction and roulette. Entry k is path active[k]; the offsets' hits of traced rays are in
-    hit_* (where o_trace). Shadow rays: the base's (has_shadow, sh_*: sh_L its value for L) and the
-    offsets' own (o_sh, o_sh_*); the NEE terms n_* are weighted by add_next_event once they are
-    traced."""
+    base's direction and roulette. The parameters are bundles splatted by hybrid.py (as
+    integrators.path.shade's): entry k is path active[k], its hit t, prim, b1, b2; the scene's
+    Surfaces, lights, guide state, primary samples; the limits max_depth, rr_depth and the shift's
+    roughness; the base's wave.PathState, Continuation and ShadowRays (its value for L); the
+    offsets.BaseBounce this bounce writes (b_*); the Offsets (o_*: their hits of traced rays in
+    hit_*, where o_trace; their own shadow rays o_sh, o_sh_*); the NeeTerms (n_*), weighted by
+    add_next_event once the shadow rays are traced."""
     for k in prange(active.shape[0]):
         i = active[k]
         alive[k] = False
@@ -61,7 +70,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         for o in range(4):
             o_sh[i, o] = False
             vis[i, o] = False
-            n_mode[i, o] = 0
+            n_mode[i, o] = NEE_NONE
         if dk == 0:
             for c in range(3):
                 L_cam[i, c] = 0.0
@@ -156,10 +165,12 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
 
         # NEE: the base's sample (the path tracer's), shifted to each offset
         if not delta:
-            ok, so, sd, tmax, contrib, wl, dist, lel, pll, lt_tri, fb, pbb = light_sample_at(
+            ls = light_sample_at(
                 mat_type, mat_param, m, lt, tri, x, ng, s, tt, wo, b, gs, -1, 1.0, tri_eps[p], tri_eps,
                 draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
                 draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)))
+            ok, so, sd, tmax, contrib = ls.ok, ls.origin, ls.direction, ls.tmax, ls.contrib
+            wl, dist, lel, pll, lt_tri, fb, pbb = ls.wl, ls.dist, ls.le, ls.pl, ls.tri, ls.f, ls.pdf
             valid = pll > 0.0 and (lel[0] > 0.0 or lel[1] > 0.0 or lel[2] > 0.0)
             if valid and not ok:  # no value, but its visibility enters the pairs' weights
                 so, sd, tmax = shadow_ray(x, ng, tri_eps[p], wl, dist, lt, lt_tri, tri_eps)
@@ -176,7 +187,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 rough_z = lt_tri < 0 or is_rough(mat_type, mat_param, tri_material[lt_tri], roughness)
                 for o in range(4):
                     if not o_alive[i, o]:
-                        n_mode[i, o] = 1
+                        n_mode[i, o] = NEE_BASE_ALONE
                         continue
                     st = o_status[i, o]
                     if st == TRACED and not (rough and o_rough[i, o] and rough_z):
@@ -184,7 +195,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                         # reconnects, and both techniques must map a path to the same partner). An
                         # offset at a delta vertex has no partner either way: the base's two techniques.
                         if bsdfs.bsdf_is_delta(mat_type, mat_param, tri_material[o_prim[i, o]]):
-                            n_mode[i, o] = 1
+                            n_mode[i, o] = NEE_BASE_ALONE
                         continue
                     y = x
                     ngy = ng
@@ -208,7 +219,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                         nl = (lt.normal[li, 0], lt.normal[li, 1], lt.normal[li, 2])
                         wlo, disto, jl = reconnection(x, y, zl, nl)
                         if not jl > 0.0:  # no partner path: the base's techniques alone
-                            n_mode[i, o] = 1
+                            n_mode[i, o] = NEE_BASE_ALONE
                             continue
                         cos_l = -dot(wlo, nl)
                         leo = triangle_emission(lt, lt_tri, cos_l)
@@ -221,9 +232,9 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                     for c in range(3):
                         n_co[i, o, c] = o_beta[i, o, c] * jl * fo[c] * leo[c] / pll
                     if st != TRACED:  # at the base's vertex: the base's shadow ray
-                        n_mode[i, o] = 2
+                        n_mode[i, o] = NEE_BASE_RAY
                         continue
-                    n_mode[i, o] = 3
+                    n_mode[i, o] = NEE_OWN_RAY
                     oo, od, otmax = shadow_ray(y, ngy, tri_eps[py], wlo, disto, lt, lt_tri, tri_eps)
                     if otmax > 0.0:
                         o_sh[i, o] = True
@@ -268,11 +279,13 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
 
 
 @kernel
-def add_next_event(active, has_shadow, vis_b, sh_L, L, G, n_mode, n_cn, n_pl, n_pb, n_co, n_rj, n_plo, n_pbo, vis):
-    """Add the bounce's NEE once its shadow rays are traced: the base's value to L, and to each pair's
+def add_next_event(active, sh_o, sh_d, sh_tmax, sh_L, has_shadow, L, G, n_cn, n_pl, n_pb, vis_b, n_mode, n_co, n_rj,
+                   n_plo, n_pbo, vis):
+    """Add the bounce's NEE once its shadow rays are traced (the base's ShadowRays, splatted, and
+    the NeeTerms n_* with the visibilities): the base's value to L, and to each pair's
     gradient w (vis_o C_o - vis_b C_b), w = pL^2 / (pL^2 + pB^2 + (R J_L)^2 (pL_o^2 + pB_o^2)), where a
     blocked side's BSDF density is 0 (a BSDF sample cannot reach the light through the occluder).
-    Mode 1 (no partner): minus the base's own weighted value."""
+    NEE_BASE_ALONE (no partner): minus the base's own weighted value."""
     for k in prange(active.shape[0]):
         i = active[k]
         vb = has_shadow[k] and vis_b[k]
@@ -281,14 +294,14 @@ def add_next_event(active, has_shadow, vis_b, sh_L, L, G, n_mode, n_cn, n_pl, n_
                 L[i, c] += sh_L[k, c]
         for o in range(4):
             mode = n_mode[i, o]
-            if mode == 0:
+            if mode == NEE_NONE:
                 continue
-            if mode == 1:
+            if mode == NEE_BASE_ALONE:
                 if vb:
                     for c in range(3):
                         G[i, o, c] -= sh_L[k, c]
                 continue
-            vo = vb if mode == 2 else vis[i, o]
+            vo = vb if mode == NEE_BASE_RAY else vis[i, o]
             pl = n_pl[i]
             pb = n_pb[i] if vb else 0.0
             po = n_pbo[i, o] if vo else 0.0

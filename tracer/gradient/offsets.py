@@ -3,6 +3,7 @@ status TRACED, RECENT, CONNECTED or BLOCKED), their camera rays (start_offsets) 
 each of the base's hits (shift_offsets: reconnect, or copy the half vector, shift.py)."""
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import prange
@@ -21,6 +22,69 @@ from .shift import is_rough, half_vector_shift, reconnection
 TRACED, RECENT, CONNECTED, BLOCKED = 0, 1, 2, 3
 
 
+class BaseBounce(NamedTuple):
+    """Per base path: its last bounce x_i -> x_{i+1}, which the shift copies."""
+
+    x: np.ndarray  # (n, 3) float64 the vertex x_i
+    prim: np.ndarray  # (n,) int64 its triangle
+    wo: np.ndarray  # (n, 3) float64 world direction back along the path
+    wt: np.ndarray  # (n, 3) float64 f cos / pdf of the sampled direction
+    pdf: np.ndarray  # (n,) float64 its density
+    delta: np.ndarray  # (n,) bool sampled from a delta lobe
+    rough: np.ndarray  # (n,) bool x_i is rough (and the lobe not delta)
+
+
+class Offsets(NamedTuple):
+    """Per base path i and offset o (replay.OFFSETS order): the offset path's state, its own rays,
+    their hits and shadow rays, and the pair's gradient so far."""
+
+    alive: np.ndarray  # (n, 4) bool
+    status: np.ndarray  # (n, 4) int8 TRACED, RECENT, CONNECTED or BLOCKED
+    beta: np.ndarray  # (n, 4, 3) float64 F_o J_o / P_b
+    R: np.ndarray  # (n, 4) float64 J_o P_o / P_b
+    x: np.ndarray  # (n, 4, 3) float64 its vertex
+    prim: np.ndarray  # (n, 4) int64 its triangle (-1: escaped)
+    wo: np.ndarray  # (n, 4, 3) float64 world direction back along it
+    pdf: np.ndarray  # (n, 4) float64 density of its last direction
+    delta: np.ndarray  # (n, 4) bool its last direction from a delta lobe
+    dist2: np.ndarray  # (n, 4) float64 squared length of its last segment
+    rough: np.ndarray  # (n, 4) bool its vertex is rough
+    hv: np.ndarray  # (n, 4) bool its last step was a half-vector copy between rough vertices
+    lights: np.ndarray  # (n, 4) bool the pair's last bounce counts the light techniques (not a copy)
+    trace: np.ndarray  # (n, 4) bool its own ray (ray_o, ray_d) is to be traced
+    reconn: np.ndarray  # (n, 4) bool its reconnection (ray_o, ray_d, tmax) is to be tested
+    ray_o: np.ndarray  # (n, 4, 3) float64
+    ray_d: np.ndarray  # (n, 4, 3) float64
+    tmax: np.ndarray  # (n, 4) float64
+    G: np.ndarray  # (n, 4, 3) float64 the weighted gradient I(p + e) - I(p) found so far
+    hit_t: np.ndarray  # (n, 4) float64 hit of its own traced ray
+    hit_prim: np.ndarray  # (n, 4) int64
+    hit_b1: np.ndarray  # (n, 4) float64
+    hit_b2: np.ndarray  # (n, 4) float64
+    sh: np.ndarray  # (n, 4) bool it has a shadow ray of its own
+    sh_o: np.ndarray  # (n, 4, 3) float64
+    sh_d: np.ndarray  # (n, 4, 3) float64
+    sh_tmax: np.ndarray  # (n, 4) float64
+
+
+class NeeTerms(NamedTuple):
+    """A bounce's NEE terms, weighted once the shadow rays are known (add_next_event): the base's
+    value, light and BSDF densities and visibility; per offset a mode (offset_shading.NEE_NONE,
+    NEE_BASE_ALONE, NEE_BASE_RAY, NEE_OWN_RAY), value, R J_L, light and BSDF densities, and the
+    visibility of its own ray."""
+
+    cn: np.ndarray  # (n, 3) float64
+    pl: np.ndarray  # (n,) float64
+    pb: np.ndarray  # (n,) float64
+    vis_b: np.ndarray  # (m,) bool per entry
+    mode: np.ndarray  # (n, 4) int8
+    co: np.ndarray  # (n, 4, 3) float64
+    rj: np.ndarray  # (n, 4) float64
+    plo: np.ndarray  # (n, 4) float64
+    pbo: np.ndarray  # (n, 4) float64
+    vis: np.ndarray  # (n, 4) bool
+
+
 class HybridBuffers:
     """The offset paths' state for a wave of `size` base paths (4 offsets each, in the order of
     replay.OFFSETS), and the base's last bounce, which the shift copies."""
@@ -32,8 +96,8 @@ class HybridBuffers:
         self.b_pdf = z()
         self.b_delta, self.b_rough = z(d=np.bool_), z(d=np.bool_)
         # NEE terms, weighted once the shadow rays are known: the base's value, light and BSDF
-        # densities; per offset a mode (0 no term, 1 the base alone, 2 the base's shadow ray,
-        # 3 its own), value, R J_L, light and BSDF densities, and the visibility of its own ray
+        # densities; per offset a mode (offset_shading.NEE_*), value, R J_L, light and BSDF densities,
+        # and the visibility of its own ray
         self.n_cn, self.n_pl, self.n_pb, self.vis_b = z(3), z(), z(), z(d=np.bool_)
         self.n_mode = z(4, d=np.int8)
         self.n_co, self.n_rj, self.n_plo, self.n_pbo, self.vis = z(4, 3), z(4), z(4), z(4), z(4, d=np.bool_)
@@ -55,11 +119,18 @@ class HybridBuffers:
         """Bytes that HybridBuffers(size) allocates."""
         return sum(a.nbytes for a in vars(HybridBuffers(1)).values() if isinstance(a, np.ndarray)) * size
 
-    def offset_state(self):
-        """The offset arrays in the order the kernels take them."""
-        return (self.alive, self.status, self.beta, self.R, self.x, self.prim, self.wo, self.pdf, self.delta,
-                self.dist2, self.rough, self.hv, self.lights, self.trace, self.reconn, self.ray_o, self.ray_d,
-                self.tmax)
+    def base(self):
+        return BaseBounce(self.b_x, self.b_prim, self.b_wo, self.b_wt, self.b_pdf, self.b_delta, self.b_rough)
+
+    def offsets(self):
+        return Offsets(self.alive, self.status, self.beta, self.R, self.x, self.prim, self.wo, self.pdf, self.delta,
+                       self.dist2, self.rough, self.hv, self.lights, self.trace, self.reconn, self.ray_o, self.ray_d,
+                       self.tmax, self.G, self.hit_t, self.hit_prim, self.hit_b1, self.hit_b2, self.sh, self.sh_o,
+                       self.sh_d, self.sh_tmax)
+
+    def nee_terms(self):
+        return NeeTerms(self.n_cn, self.n_pl, self.n_pb, self.vis_b, self.n_mode, self.n_co, self.n_rj, self.n_plo,
+                        self.n_pbo, self.vis)
 
 
 @jit(inline="always")
@@ -75,10 +146,12 @@ def _offset(o):
 
 
 @kernel
-def start_offsets(cam, width, height, crop, jitter, ps, key, pix, o_ray_o, o_ray_d, o_alive, o_status, o_beta, o_R,
-                  o_wo, o_hv, o_trace, o_reconn, G):
-    """Offset camera rays of base paths 0 .. n-1 (keys and film pixels from the camera source):
-    through the neighbouring pixel at the base's position inside its pixel."""
+def start_offsets(cam, width, height, crop, jitter, ps, key, pix, o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights, o_trace,
+                  o_reconn, o_ray_o, o_ray_d, o_tmax, G, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o, o_sh_d,
+                  o_sh_tmax):
+    """Offset camera rays of base paths 0 .. n-1 (keys and film pixels from the camera source)
+    into the Offsets (o_*, splatted): through the neighbouring pixel at the base's position inside
+    its pixel."""
     cw = crop[2]
     for i in prange(key.shape[0]):
         px = crop[0] + pix[i] % cw
@@ -110,12 +183,14 @@ def _finite(o_beta, o_R, i, o):
 
 
 @kernel
-def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, roughness,
-                  b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
-                  o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights,
-                  o_trace, o_reconn, o_ray_o, o_ray_d, o_tmax):
-    """Shift each offset across the base's last bounce x_i -> x_{i+1} (entry k: path active[k], its
-    ray ray_d[k] and hit t, prim): reconnection (a visibility ray to test, o_reconn) or half-vector
+def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param,
+                  roughness, b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
+                  o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights, o_trace,
+                  o_reconn, o_ray_o, o_ray_d, o_tmax, G, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o, o_sh_d,
+                  o_sh_tmax):
+    """Shift each offset (the Offsets o_*) across the base's last bounce x_i -> x_{i+1} (the
+    BaseBounce b_*; entry k: path active[k], its ray ray_d[k] and hit t, prim, b1, b2; the
+    scene's Surfaces): reconnection (a visibility ray to test, o_reconn) or half-vector
     copy (a ray to trace, o_trace); updates beta_o, R, and the offset's last density. o_lights: whether
     the pair's weights for this bounce count the light techniques (not after a half-vector copy, whose
     pairs take no NEE either: NEE reconnects, and both techniques must map a path to the same partner)."""

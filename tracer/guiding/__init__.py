@@ -1,10 +1,10 @@
 """Directional samplers for the bounce direction, registered by name.
 
 `bsdf` is plain BSDF importance sampling (no guide). `grid` and `photon` are histogram guides on
-a hierarchical grid (tracer/guiding/histogram.py), learned from camera paths and from photons.
+a hierarchical grid (tracer/guiding/grid/guides.py), learned from camera paths and from photons.
 Each guide is built from a settings dict; unknown names or settings are errors that list the
 valid ones. A guide is a `base.Guide`: `prepare(scene, ctx)`, `state()` (the arrays the
-integrator's kernels read, a `spatial.GuideState`), `observe(records)` (the vertices of a wave of
+integrator's kernels read, a `contract.GuideState`), `observe(records)` (the vertices of a wave of
 camera paths), `update()` (between passes), `schedule(session)` (its passes), plus
 `memory_bytes()` and `stats()`; docs/architecture.md shows where each is called.
 """
@@ -12,9 +12,9 @@ import copy
 
 from ..errors import SettingsError, unknown_name
 from .base import Guide
-from .histogram import GridGuide, PhotonGuide
-from .odis import OdisGuide
-from .pss import PSSGuide
+from .grid.guides import GridGuide, PhotonGuide
+from .odis.guide import OdisGuide
+from .pss.warp import PSSGuide
 
 # name -> (factory or None for plain BSDF sampling, {setting: default})
 REGISTRY = {
@@ -56,8 +56,9 @@ def warm_up_guides(ctx):
     import numpy as np
 
     from .directional import bin_of_batch, build_tables
-    from .photons import trace_photons
-    from .spatial import HierarchicalGrid, empty_state
+    from .grid.photons import trace_photons
+    from .grid.spatial import HierarchicalGrid
+    from .contract import empty_state
 
     trace_photons(ctx, empty_state(), np.full(1, -1, np.int32), 1, 0, lambda *a: None, wave_size=1)
     grid = HierarchicalGrid(np.zeros(3), np.ones(3), 2, 2, 2, 6)
@@ -69,15 +70,15 @@ def warm_up_guides(ctx):
     rec = Records.allocate(1)
     grid.visit_records(rec, 0)
     grid.splat_records(rec)
-    from .histogram import _mis_stats, _normalised, _row_sums
+    from .grid.guides import _mis_stats, _normalised, _row_sums
 
     _normalised(grid.power, np.zeros(1, np.int64), _row_sums(grid.power, np.zeros(1, np.int64)) + 1.0)
-    from .reconstruct import Gaussian
+    from .grid.reconstruct import Gaussian
 
     Gaussian(1.0).reconstruct(np.zeros((1, 4, 4), np.float32), None, None)
     _mis_stats(np.zeros(1, np.int32), np.zeros(1, np.int8), np.zeros(1, np.float32), np.zeros(1, np.float32),
                np.zeros((1, 2)), np.zeros((1, 2)))
-    from .histogram import _mix_moments
+    from .grid.guides import _mix_moments
 
     f32 = np.zeros(1, np.float32)
     _mix_moments(np.zeros(1, np.int32), np.zeros(1, np.int8), f32, f32, f32, f32, np.ones(1), np.ones(1),

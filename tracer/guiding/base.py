@@ -5,8 +5,8 @@ render() and the integrator ask of it:
 
     prepare(scene, ctx)    start of a render (ctx: tracer.context.RenderContext)
     warm_up(ctx)           before the clock starts: compile what its passes need
-    state()                the GuideState the kernels sample from (tracer.guiding.spatial): they
-                           locate a vertex's map (`spatial.locate(state, x, n, pixel, depth)`, a
+    state()                the GuideState the kernels sample from (tracer.guiding.contract): they
+                           locate a vertex's map (`contract.locate(state, x, n, pixel, depth)`, a
                            voxel's map, or a per-pixel map at the first bounce), then draw from it
                            and evaluate it (`slot_sample`, `slot_pdf`)
     observe(records)       the vertices of a wave of camera paths (guiding.records), in passes run
@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 from ..errors import SettingsError
-from .spatial import empty_state
+from .contract import empty_state
 
 
 def _int(name, v, lo):
@@ -82,10 +82,10 @@ class Guide:
         pass
 
     def schedule(self, session):
-        """Run the render's passes: Algorithm 1 (guiding.schedule) for a guide that learns, else the
+        """Run the render's passes: Algorithm 1 (guiding.grid.schedule) for a guide that learns, else the
         final passes alone, with this guide's split plan."""
         if self.learns:
-            from .schedule import algorithm1
+            from .grid.schedule import algorithm1
 
             algorithm1(session, self)
         else:

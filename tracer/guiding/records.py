@@ -52,11 +52,6 @@ class Records(NamedTuple):
         """A view of the first n entries."""
         return Records(*(a[:n] for a in self))
 
-    def kernel_args(self):
-        """{r_<field>: array} for the shading kernel's keyword arguments (radiance excluded: it is
-        filled in by finalize_records)."""
-        return {"r_" + f: getattr(self, f) for f in self._fields if f != "radiance"}
-
 
 @kernel
 def finalize_records(strategy, path, beta, L0, radiance, L):

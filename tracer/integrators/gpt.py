@@ -20,7 +20,8 @@ class GptIntegrator(Integrator):
     """`--integrator gpt`: gradient-domain path tracing, reconstructed by `recon`.
 
     shift        hybrid (reconnection between vertices rougher than `roughness`, half-vector copy
-                 elsewhere) or replay (the same random numbers from the neighbouring pixel)
+                 elsewhere; the default without a guide) or replay (the same random numbers from the
+                 neighbouring pixel; the default with a guide)
     recon        l2 (keeps the image mean), l1 (darker at low spp), gradnet (learned; `weights`,
                  `correction` 0/1) or none (the base image); recon_alpha: the base's weight
     nee          1: next-event estimation with MIS; 0: none (replay shift only)
@@ -50,6 +51,8 @@ class GptIntegrator(Integrator):
     def check_guide(self, guide, guide_name):
         if guide is None:
             return
+        if self.shift == "hybrid" and "shift" not in self.given:
+            self.shift = "replay"  # the default shift with a guide: the hybrid one samples the BSDF only
         if self.shift == "hybrid":
             raise SettingsError(f"integrator gpt: the hybrid shift samples the BSDF only; with --guide {guide_name} "
                                 "use gpt:shift=replay")

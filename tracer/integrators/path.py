@@ -10,7 +10,7 @@ which go to the accel (Embree or the Numba BVH) in one batch per stage:
 
 The steps of `shade` are the helpers of tracer.shading; its random numbers go through the sample
 seam `rng.draw` (the stream, or a source's external primary samples). With a guide, a non-delta
-vertex asks it where its map is (`guiding.spatial.locate`: a voxel's map, or a per-pixel map at
+vertex asks it where its map is (`guiding.contract.locate`: a voxel's map, or a per-pixel map at
 the first bounce) and draws its direction from the one-sample MIS mixture p = a p_bsdf + (1 - a)
 p_guide (the strategy picked by the STRATEGY dimension); that mixture density is the one NEE's and
 the emission's MIS weights use. A guide that learns gets, per vertex, a record (tracer.guiding.
@@ -34,7 +34,7 @@ from numba import prange
 from .._jit import kernel
 from ..film import aovs_of, combine_films
 from ..guiding.records import finalize_records
-from ..guiding.spatial import locate
+from ..guiding.contract import locate
 from ..lights import ENV_NONE
 from ..rng import DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, draw
 from ..sampling import dot, frame, to_local, triangle_point
@@ -48,40 +48,46 @@ from .base import Integrator
 MAX_BOUNCES = 4096
 
 
+RECORD_NONE = 0  # shade's `record`: no records
+RECORD_ALL = 1  # records of the full incident radiance
+RECORD_INDIRECT = 2  # records of the radiance less the emission the direction hits directly (NEE's part)
+
+
 @kernel
 def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, lt, gs,
           ps, max_depth, rr_depth, nee,
-          beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open,
-          alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
-          record, rec_base, prev_rec, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0,
-          r_beta, r_pb, r_prev):
+          beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open, prev_rec,
+          alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow, record, rec_base,
+          r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0, r_beta, r_pb, r_radiance, r_prev):
     """One bounce for every active path: emission, NEE sample, direction sample, roulette.
 
-    Entry k of the hit arrays (t, prim, b1, b2) and of ray_o/ray_d belongs to path slot
-    active[k]. surf: the scene's Surfaces (triangles, normals, materials, ray offsets); lt: the
-    lights; gs: the guide's GuideState (empty: BSDF sampling); ps: the wave's PrimarySamples;
-    nee: next-event estimation on (else emission found by a path counts in full, without MIS).
-    Path state (beta ... aov) is per slot; L_cam[i] gets the light the camera ray sees directly
-    (the emission at the first hit, or the environment if it escapes). Writes the continuation ray to next_o/next_d[k] with
-    alive[k], and a shadow ray (origin, unit direction, tmax, unoccluded contribution) with
-    has_shadow[k].
+    The parameters come in bundles, each splatted by trace_wave from one declared field list (the
+    kernel takes the arrays one by one: Numba 0.68 loses writes inside a parallel loop into arrays
+    that arrive in a tuple, docs/findings.md; tests/test_seams.py checks every name against its
+    bundle): the hits (t, prim, b1, b2) of entry k, whose ray is ray_o/ray_d[k] and whose path
+    slot is active[k]; the scene's context.Surfaces; lt the lights; gs the guide's GuideState
+    (empty: BSDF sampling); ps the wave's PrimarySamples; the limits max_depth, rr_depth and nee
+    (False: no light sampling; emission found by a path then counts in full, without MIS); the
+    wave.PathState of every slot (L_cam[i] gets the light the camera ray sees directly: the
+    emission at the first hit, or the environment if it escapes); the wave.Continuation of entry
+    k (its next ray) and its wave.ShadowRays (origin, unit direction, tmax, unoccluded value); the
+    record mode and base, and the guiding.records.Records fields (r_*).
 
-    Records (record > 0): the vertex of entry k goes to record rec_base + k (strategy -1 where
-    nothing was sampled) in the r_* arrays (the fields of guiding.records.Records, passed by name,
-    one array each: Numba's parallel loops can drop writes into arrays that arrive inside a
-    NamedTuple). record 1: records of the full incident radiance; 2: of the radiance less the
+    Records (record RECORD_ALL or RECORD_INDIRECT): the vertex of entry k goes to record
+    rec_base + k of the r_* arrays (strategy -1 where nothing was sampled).
+    RECORD_ALL: records of the full incident radiance; RECORD_INDIRECT: of the radiance less the
     emission the direction hits directly (the part NEE samples). prev_rec[i] is the record of the
-    path's last vertex: emission found by its sampled direction counts there in full (mode 1), not
-    MIS-weighted, since the vertex's own NEE, which covers the rest, is not in its record; or not
-    at all (mode 2). r_prev of a record is the record of the path's vertex before it (-1 at the
-    first hit and after a delta vertex).
+    path's last vertex: emission found by its sampled direction counts there in full
+    (RECORD_ALL), not MIS-weighted, since the vertex's own NEE, which covers the rest, is not in
+    its record; or not at all (RECORD_INDIRECT). A record's `prev` is the record of the path's
+    vertex before it (-1 at the first hit and after a delta vertex).
     """
     n = active.shape[0]
     for k in prange(n):
         i = active[k]
         alive[k] = False
         has_shadow[k] = False
-        if record > 0:
+        if record != RECORD_NONE:
             r_strategy[rec_base + k] = -1
         dk = depth[i]                                   # bounces so far (0 at the first hit)
         wray = (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2])  # direction the path arrived along
@@ -99,8 +105,8 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 if dk == 0:
                     for c in range(3):
                         L_cam[i, c] = b[c] * le[c] * w
-                if record > 0 and prev_rec[i] >= 0:
-                    x_le = -(1.0 - w) if record == 1 else w
+                if record != RECORD_NONE and prev_rec[i] >= 0:
+                    x_le = -(1.0 - w) if record == RECORD_ALL else w
                     for c in range(3):
                         r_L0[prev_rec[i], c] += b[c] * le[c] * x_le
             continue
@@ -119,8 +125,8 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             if dk == 0:
                 for c in range(3):
                     L_cam[i, c] = b[c] * le[c] * w
-            if record > 0 and prev_rec[i] >= 0:
-                x_le = -(1.0 - w) if record == 1 else w
+            if record != RECORD_NONE and prev_rec[i] >= 0:
+                x_le = -(1.0 - w) if record == RECORD_ALL else w
                 for c in range(3):
                     r_L0[prev_rec[i], c] += b[c] * le[c] * x_le
 
@@ -169,10 +175,10 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
 
         # Record the vertex for a guide that learns (also when the path ends here: its radiance is 0)
         last = -1
-        if record > 0:
+        if record != RECORD_NONE:
             last = prev_rec[i]
             prev_rec[i] = -1
-        if record > 0 and not delta and pdf > 0.0:
+        if record != RECORD_NONE and not delta and pdf > 0.0:
             r = rec_base + k
             r_prev[r] = last
             prev_rec[i] = r
@@ -222,11 +228,13 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
     active, active2 = buf.active, buf.active2
     active[:n] = np.arange(n)
     n_active = n
-    record = 0 if observe is None else (1 if direct else 2)
+    record = RECORD_NONE if observe is None else (RECORD_ALL if direct else RECORD_INDIRECT)
     rec = buf.records
     n_rec = 0
     n_slots = n
-    splitting = split is not None and record == 0 and buf.capacity > buf.size
+    splitting = split is not None and record == RECORD_NONE and buf.capacity > buf.size
+    limits = (ctx.max_depth, ctx.rr_depth, ctx.nee)
+    state, out, shadow, queue = buf.path_state(), buf.continuation(), buf.shadow_rays(), buf.shadow_queue()
     t0 = stats.tick("camera", t0)
     for _ in range(MAX_BOUNCES + 1):
         if n_active == 0:
@@ -241,14 +249,10 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
             t0 = stats.tick("split", t0)
         if record > 0 and n_rec + n_active > rec.strategy.shape[0]:
             rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
-        shade(active[:n_active], ro, rd, *hits, *ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth,
-              ctx.rr_depth, ctx.nee, buf.beta, buf.L, buf.L_cam, buf.depth, buf.prev_pdf, buf.prev_delta, buf.gain, buf.key, buf.pix,
-              buf.aov, buf.aov_open, buf.alive, buf.next_o, buf.next_d, buf.sh_o, buf.sh_d, buf.sh_tmax, buf.sh_L, buf.has_shadow,
-              record, n_rec, buf.prev_rec, **rec.kernel_args())
+        shade(active[:n_active], ro, rd, *hits, *ctx.surfaces, ctx.lights, ctx.guide_state, ps, *limits, *state,
+              *out, *shadow, record, n_rec, *rec)
         t0 = stats.tick("shade", t0)
-        n_next, ns = compact(active[:n_active], buf.alive, buf.next_o, buf.next_d, buf.has_shadow, buf.sh_o,
-                             buf.sh_d, buf.sh_tmax, buf.sh_L, active2, buf.ray_o, buf.ray_d, buf.sp_path,
-                             buf.sp_entry, buf.sp_o, buf.sp_d, buf.sp_tmax, buf.sp_L)
+        n_next, ns = compact(active[:n_active], *out, *shadow, active2, buf.ray_o, buf.ray_d, *queue)
         active, active2 = active2, active
         t0 = stats.tick("compact", t0)
         if ns:
@@ -256,7 +260,7 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
             add_unoccluded(buf.sp_path[:ns], occ, buf.sp_L[:ns], buf.L, buf.sp_entry[:ns], rec.L0, n_rec, record > 0)
             stats.shadow_rays += ns
             t0 = stats.tick("occluded", t0)
-        if record > 0:
+        if record != RECORD_NONE:
             n_rec += n_active
         n_active = n_next
     if n_slots > n:

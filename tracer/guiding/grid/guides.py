@@ -42,7 +42,7 @@ no longer holds the light on the floor beside it, nor, for a thin wall, the ligh
 side, both of which lie behind the wall and send guided samples where the BSDF is zero.
 `normal_classes` 1 is the paper's one map per voxel.
 
-The schedule is Algorithm 1 (tracer/guiding/schedule.py); this module learns. Mixing weights
+The schedule is Algorithm 1 (tracer/guiding/grid/schedule.py); this module learns. Mixing weights
 (the probability a of BSDF sampling, per voxel) start at 0.5 and stay in [alpha_min, alpha_max]:
 - `mixing` eq14 (the paper's): once a voxel has `mis_min_samples` vertices of both strategies,
   a = mean L_bsdf / (mean L_bsdf + mean L_guide), L = radiance x |f cos| of each vertex's direction.
@@ -59,15 +59,16 @@ import numpy as np
 
 from numba import prange
 
-from .._jit import jit, kernel
-from ..errors import SettingsError
-from ..film import Film
-from ..splitting import WeightWindow, observe_outgoing, outgoing
-from .base import Guide, _float, _int
-from .directional import build_tables
+from ..._jit import jit, kernel
+from ...errors import SettingsError
+from ...film import Film
+from ...splitting import WeightWindow, observe_outgoing, outgoing
+from ..base import Guide, _float, _int
+from ..directional import build_tables
 from .photons import env_aim, trace_photons
 from .reconstruct import RECONSTRUCTORS, make_reconstructor
-from .spatial import HierarchicalGrid, empty_state
+from .spatial import HierarchicalGrid
+from ..contract import empty_state
 
 COMMON = {
     "iterations": 5,  # training iterations T after the pilot pass

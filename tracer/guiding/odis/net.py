@@ -1,6 +1,6 @@
 """The ODIS reconstruction network (Bako et al. 2019, sections 4.1-4.4), sized for CPU inference.
 
-Input per map: the gather of tracer.guiding.odis_input (9 channels on the n_theta x n_phi sphere
+Input per map: the gather of tracer.guiding.odis.features (9 channels on the n_theta x n_phi sphere
 grid, the `sampled` and `valid` masks), turned into 10 channels by `features`:
 
     0        radiance over the mean of the map's data bins, range-compressed (mu-law, MU)
@@ -27,8 +27,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .photon_cnn import (WEIGHTS_DIR, Conv, PartialConv, _act, count_flops, inner_levels, load_weights,  # noqa: F401
-                         parameter_count)
+from ...nn import (WEIGHTS_DIR, Conv, PartialConv, act, count_flops, inner_levels, load_weights,  # noqa: F401
+                  parameter_count)
 
 MU = 5000.0  # the mu-law's compression (section 4.2)
 N_IN = 10
@@ -107,7 +107,7 @@ class OdisUNet(nn.Module):
         """x (S, 10, H, W) from features(), valid (S, H, W) {0, 1}; H and W divisible by 4. Returns
         the compressed radiance (S, H, W), zero outside valid."""
         e1, _ = self.e1(x, x[:, 9:10])
-        _, _, d1 = inner_levels(self, _act(e1))
+        _, _, d1 = inner_levels(self, act(e1))
         up = F.interpolate(d1, scale_factor=2, mode="nearest")
         return F.softplus(self.out(torch.cat([up, x[:, 0:1], x[:, 9:10]], 1)))[:, 0] * valid
 

@@ -30,11 +30,11 @@ from typing import NamedTuple
 import numpy as np
 from numba import prange
 
-from .. import bsdfs
-from .._jit import jit, kernel
-from ..lights import sample_light
-from ..rng import P_DIR, P_LIGHT, P_POS, P_RR, photon_dim, photon_key, uniform
-from ..sampling import (
+from ... import bsdfs
+from ..._jit import jit, kernel
+from ...lights import sample_light
+from ...rng import P_DIR, P_LIGHT, P_POS, P_RR, photon_dim, photon_key, uniform
+from ...sampling import (
     dot,
     frame,
     sample_concentric_disk,
@@ -45,8 +45,8 @@ from ..sampling import (
     to_world,
     triangle_point,
 )
-from .directional import bin_direction, bin_of_batch, direction_bin, map_pdf, map_sample
-from .spatial import find_voxel
+from ..directional import bin_direction, bin_of_batch, direction_bin, map_pdf, map_sample
+from ..contract import find_voxel
 
 
 AIM_THETA = 32

@@ -21,8 +21,8 @@ has no sample, so that pixel takes BSDF sampling alone).
 import numpy as np
 from numba import prange
 
-from .._jit import jit, kernel
-from .directional import bin_direction, direction_bin
+from ..._jit import jit, kernel
+from ..directional import bin_direction, direction_bin
 
 N_CHANNELS = 9
 

@@ -18,7 +18,7 @@ classical filters here respect that: phi wraps, z is mirrored at the poles.
 - `pullpush`: pull-push (Gortler et al. 1996): empty bins are filled from a pyramid of
   count-weighted averages; bins with data keep their value.
 - `none`: the histogram as it is.
-- `cnn`: the photon map network (tracer.guiding.photon_cnn) with the shipped weights
+- `cnn`: the photon map network (tracer.guiding.grid.photon_cnn) with the shipped weights
   (tracer/weights/photon_cnn.*), trained offline by learn/ on procedural scenes, for the maps
   holding fewer than `max_photons` photons (the Gaussian filter for the others); one batched
   torch pass per update, under torch.inference_mode(). Its time is kept in `time_inference`.
@@ -29,8 +29,8 @@ import numba
 import numpy as np
 from numba import prange
 
-from .._jit import kernel
-from ..errors import SettingsError, unknown_name
+from ..._jit import kernel
+from ...errors import SettingsError, unknown_name
 
 
 @kernel

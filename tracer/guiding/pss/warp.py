@@ -8,7 +8,7 @@ The schedule of a render:
    pass and stays in the image.
 2. Learning (torch, CPU): the candidate set T is split 80/20 by sample, each part resampled in
    proportion to luminance into S (|T| = alpha |S|, systematic resampling), and Real NVP flows
-   (tracer.guiding.pss_flow) are fitted by maximum likelihood (Adam) to S. With `m`, `layers` or
+   (tracer.guiding.pss.flow) are fitted by maximum likelihood (Adam) to S. With `m`, `layers` or
    `width` "auto", every candidate of M_CHOICES x SIZES trains for half the budget split among them,
    and the one of least validation NLL takes the other half.
 3. Warped passes (the final passes): per wave, z uniform (a stream of its own), one sample in
@@ -30,12 +30,12 @@ import time as _time
 import numba
 import numpy as np
 
-from ..errors import SettingsError, unknown_name
-from ..film import Film
-from ..lights import luminance
-from ..rng import pss_dims, uniform_batch, primary_samples
-from ..sources import CameraSource
-from .base import Guide, _float, _int
+from ...errors import SettingsError, unknown_name
+from ...film import Film
+from ...lights import luminance
+from ...rng import pss_dims, uniform_batch, primary_samples
+from ...sources import CameraSource
+from ..base import Guide, _float, _int
 
 CONDITIONS = ("image", "pixel")
 TARGETS = ("relative", "luminance")
@@ -115,7 +115,7 @@ class WarpSource(CameraSource):
 
     def __init__(self, flow, dims, image, defensive, seed):
         super().__init__()
-        from . import pss_flow
+        from . import flow as pss_flow
 
         self._pf = pss_flow
         self.flow = flow
@@ -231,9 +231,9 @@ class PSSGuide(Guide):
 
         torch.optim.Adam([torch.zeros(1, requires_grad=True)])
 
-        from ..integrators.path import trace_wave
-        from ..sources import PrimarySampleSource
-        from ..wave import Stats, WaveBuffers
+        from ...integrators.path import trace_wave
+        from ...sources import PrimarySampleSource
+        from ...wave import Stats, WaveBuffers
 
         dims = pss_dims(1)
         src = PrimarySampleSource(np.full((1, dims.shape[0]), 0.5), dims, whole_image=True)
@@ -315,7 +315,7 @@ class PSSGuide(Guide):
     def learn(self, ctx, film, sample0, seconds, stop=None):
         """Fit the flow to the candidate pass; returns None, or why there is no warp. stop(), if
         given, is asked after every batch: True ends the training (Ctrl-C)."""
-        from . import pss_flow
+        from . import flow as pss_flow
 
         end = _time.perf_counter() + seconds  # the examples' preparation counts too
         self._stats.update(condition=self.condition, target=self.target, defensive=self.defensive)
@@ -384,7 +384,7 @@ class PSSGuide(Guide):
         """E[f^2 / q] / E[f^2] over the validation candidates (uniform samples), f the training target
         (`target`): the second moment per sample that the mixture promises over uniform sampling
         for that target (1: no gain)."""
-        from . import pss_flow
+        from . import flow as pss_flow
 
         sel = f > 0
         if not sel.any():
@@ -410,7 +410,7 @@ class _Fit:
     def __init__(self, guide, m, layers, width, data, stop=None):
         import torch
 
-        from . import pss_flow
+        from . import flow as pss_flow
 
         self.torch, self.pf = torch, pss_flow
         self.m, self.layers, self.width = m, layers, width

@@ -225,7 +225,7 @@ def flops_per_sample(flow):
 
 def save(flow, path, extra=None):
     """Write the flow's config, weights and `extra` (a dict) to `path` (torch.save), atomically."""
-    from ..imageio import replace_atomically
+    from ...imageio import replace_atomically
 
     blob = {"config": flow.config, "state": flow.state_dict(), "extra": extra or {}}
     replace_atomically(os.fspath(path), lambda tmp: torch.save(blob, tmp))

@@ -30,12 +30,12 @@ import time as _time
 import numpy as np
 from numba import prange
 
-from .._jit import jit, kernel
-from ..errors import SettingsError, unknown_name
-from .base import Guide, _float, _int
-from .directional import FOUR_PI, MapTables, build_tables, quantised_weight
-from .odis_input import _points, first_sample, gather, initial_samples
-from .spatial import empty_state
+from ..._jit import jit, kernel
+from ...errors import SettingsError, unknown_name
+from ..base import Guide, _float, _int
+from ..directional import FOUR_PI, MapTables, build_tables, quantised_weight
+from .features import _points, first_sample, gather, initial_samples
+from ..contract import empty_state
 
 N_THETA = N_PHI = 32
 INITIAL_DEPTH = 3  # direct plus one-bounce indirect light at the first hit (weights trained so)
@@ -215,9 +215,9 @@ def reference_maps(ctx, points, normals, per_bin, rng, seed):
     ProbeSource; ctx.max_depth 2: the first hit's emission and its direct light). Probes start
     16 x the median ray offset above the surface. rng (a numpy Generator) jitters the directions;
     the probes' keys derive from `seed` and the point's index."""
-    from ..session import trace_source
-    from ..sources import ProbeSource
-    from ..wave import WaveBuffers
+    from ...session import trace_source
+    from ...sources import ProbeSource
+    from ...wave import WaveBuffers
 
     eps = 16.0 * float(np.median(ctx.tri_eps))
     out = np.zeros((points.shape[0], N_THETA * N_PHI), np.float32)
@@ -313,7 +313,7 @@ class OdisGuide(Guide):
 
     def _load(self):
         if self.model is None:
-            from . import odis_net
+            from . import net as odis_net
 
             self.model, self.manifest = odis_net.load(self.weights)
         return self.model
@@ -389,7 +389,7 @@ class OdisGuide(Guide):
 
     def _maps(self, s, w, h):
         """(MapTables of the P = w h film pixels, usable (P,)) from the initial samples s."""
-        from . import odis_net
+        from . import net as odis_net
 
         model = self._load()
         cx, cy = centre_axis(w, self.stride), centre_axis(h, self.stride)
