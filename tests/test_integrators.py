@@ -44,9 +44,10 @@ def test_unknown_integrators_and_settings_name_the_valid_ones():
     with pytest.raises(SettingsError, match="nee=0 goes with shift=replay"):
         make_integrator("gpt:nee=0")
     scene = _scene("cornell", 8, 8)
-    with pytest.raises(SettingsError, match="the hybrid shift samples the BSDF only"):
-        tracer.render(scene, spp=1, integrator="gpt:shift=hybrid", guide="photon")
-    assert tracer.render(scene, spp=2, integrator="gpt", guide="grid").stats["shift"] == "replay"  # the default with a guide
+    with pytest.raises(SettingsError, match="the hybrid shift takes guides without per-pixel maps"):
+        tracer.render(scene, spp=1, integrator="gpt:shift=hybrid", guide="odis")
+    assert tracer.render(scene, spp=2, integrator="gpt", guide="odis").stats["shift"] == "replay"  # its default
+    assert tracer.render(scene, spp=2, integrator="gpt", guide="grid").stats["shift"] == "hybrid"
     with pytest.raises(SettingsError, match="warps them"):
         tracer.render(scene, spp=1, integrator="gpt:shift=replay", guide="pss")
     with pytest.raises(SettingsError, match="has no setting 'shift'"):
@@ -93,26 +94,29 @@ def test_nee_off_gpt_replay_is_unbiased():
     assert np.all(np.abs(z) < z_critical(3)), (z, m0, m1)
 
 
-@pytest.mark.parametrize("guide", ["photon", "odis"])
-def test_guided_gpt_gradients_are_the_differences_of_the_path_tracers_pixels(guide):
-    """gpt with the replay shift and a guide: the guide trains by its own schedule, then base and
-    offsets sample its mixture. Per-pixel z-scores of dx, dy against an unguided path render's
-    pixel differences (tests/gradient/zscores.py): their mean over m pixels, times sqrt(m), is a
-    z-score; a gradient biased by a shift that drops the offset's own mixture density would move
-    it by several units."""
-    for key, z in gradient_z("cornell", 24, 64, 512, shift="replay", guide=guide):
+@pytest.mark.parametrize("guide,shift", [("photon", "replay"), ("odis", "replay"), ("photon", "hybrid"),
+                                         ("grid", "hybrid")])
+def test_guided_gpt_gradients_are_the_differences_of_the_path_tracers_pixels(guide, shift):
+    """gpt with a guide: the guide trains by its own schedule, then base and offsets sample its
+    mixture (the hybrid shift gives each offset its own pixel's mixture density in its weights).
+    Per-pixel z-scores of dx, dy against an unguided path render's pixel differences
+    (tests/gradient/zscores.py): their mean over m pixels, times sqrt(m), is a z-score; a
+    gradient biased by a shift that drops the offset's own mixture density would move it by
+    several units."""
+    for key, z in gradient_z("cornell", 24, 64, 512, shift=shift, guide=guide):
         m = z.size
         assert m > 100
-        assert abs(z.mean()) * np.sqrt(m) < z_critical(2), f"{guide} {key}: mean z {z.mean():.3f}"
-        assert 0.5 < z.std() < 1.5, f"{guide} {key}: z spread {z.std():.3f}"
+        assert abs(z.mean()) * np.sqrt(m) < z_critical(2), f"{guide} {shift} {key}: mean z {z.mean():.3f}"
+        assert 0.5 < z.std() < 1.5, f"{guide} {shift} {key}: z spread {z.std():.3f}"
 
 
-def test_guided_gpt_image_mean_is_the_path_tracers():
-    """gpt:shift=replay,recon=l2 with the photon guide: the reconstruction's image mean against a
-    path render's (the L2 solve keeps the mean of the base, an unbiased guided estimate)."""
+@pytest.mark.parametrize("shift", ["replay", "hybrid"])
+def test_guided_gpt_image_mean_is_the_path_tracers(shift):
+    """gpt (recon l2) with the photon guide: the base image's mean against a path render's (z-test
+    with both variances), and the reconstruction's mean the base's (the L2 solve keeps it)."""
     scene = _scene("ajar", 24, 24)
     p = tracer.render(scene, spp=256, seed=1)
-    g = tracer.render(scene, spp=256, seed=2, guide="photon", integrator="gpt:shift=replay")
+    g = tracer.render(scene, spp=256, seed=2, guide="photon", integrator=f"gpt:shift={shift}")
     assert_clean(g)
     assert [e["kind"] for e in g.stats["passes"]][:2] == ["pilot", "train"]
     assert all(e["weight"] == (1.0 if e["kind"] == "gradient" else 0.0) for e in g.stats["passes"])
@@ -132,11 +136,11 @@ def test_cli_runs_guided_gpt_and_lists_integrators(capsys, tmp_path):
                            "photon:iterations=1", "-q", "-o", str(out))
     assert code == 0, err
     st = json.loads((tmp_path / "g.json").read_text())
-    assert st["integrator"] == "gpt" and st["guide"] == "photon" and st["shift"] == "replay"
+    assert st["integrator"] == "gpt" and st["guide"] == "photon" and st["shift"] == "hybrid"
     assert (tmp_path / "g.dx.exr").is_file()
     code, text, _ = run_cli(capsys, "--list-integrators")
     assert code == 0 and "gpt:" in text and "path:" in text and "nee = 1" in text and "shift = hybrid" in text
     fails_with(capsys, [os.path.join(ROOT, "scenes", "cornell", "cornell.obj"), "--integrator", "path:recon=l1"],
                "integrator 'path' has no setting 'recon'")
     fails_with(capsys, [os.path.join(ROOT, "scenes", "cornell", "cornell.obj"), "--integrator", "gpt:shift=hybrid",
-                        "--guide", "grid"], "use gpt:shift=replay")
+                        "--guide", "odis"], "use gpt:shift=replay")

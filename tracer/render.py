@@ -88,8 +88,9 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                "path:nee=0" without next-event estimation) or "gpt" (gradient-domain path tracing,
                tracer.gradient), e.g. "gpt:shift=replay,recon=l1"; integrator_settings: a dict of
                its settings (an Integrator object is accepted too). gpt's settings: shift "hybrid"
-               (reconnecting vertices rougher than `roughness`; BSDF sampling only; the default
-               without a guide) or "replay" (the default with a guide: grid, photon, odis); recon "l2" (the
+               (reconnecting vertices rougher than `roughness`; with grid and photon each offset
+               takes its own pixel's mixture density) or "replay" (the default with odis, whose
+               per-pixel maps the hybrid shift does not shift); recon "l2" (the
                default) or "l1" (screened Poisson, with weight recon_alpha on the base; l1 is
                darker at low spp), "gradnet" (the learned reconstruction; `weights`, the name of
                shipped weights, `correction` 0 or 1) or "none" (the base image); nee 0 or 1. The

@@ -65,7 +65,7 @@ def test_reconstruction_settings_are_checked():
                      ({"integrator": "gpt", "shift_roughness": -1.0}, "shift_roughness"),
                      ({"integrator": "gpt", "recon": "l3"}, "reconstruction"),
                      ({"integrator": "gpt", "recon_alpha": 0.0}, "recon_alpha"),
-                     ({"integrator": "gpt", "shift": "hybrid", "guide": "photon"}, "BSDF only")):
+                     ({"integrator": "gpt", "shift": "hybrid", "guide": "odis"}, "per-pixel maps")):
         with pytest.raises(SettingsError, match=frag):
             tracer.render(scene, spp=1, **kw)
 
@@ -84,9 +84,9 @@ def test_cli_writes_the_reconstruction_and_the_buffers(tmp_path, capsys):
     dx = tracer.read_image(str(tmp_path / "g" / "c.dx.exr"))
     assert dx.shape == (16, 16, 3) and np.isfinite(dx).all()
     code = main([os.path.join(ROOT, "scenes", "cornell", "cornell.obj"), "--integrator", "gpt", "--shift", "hybrid",
-                 "--guide", "grid", "-o", str(out), "-q"])
+                 "--guide", "odis", "-o", str(out), "-q"])
     err = capsys.readouterr().err
-    assert code == 2 and len(err.strip().splitlines()) == 1 and "BSDF only" in err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "per-pixel maps" in err
 
 
 SHARED = os.path.join(os.path.dirname(ROOT), "shared", "scenes")

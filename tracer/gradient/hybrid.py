@@ -21,6 +21,11 @@ MIS: its value is the path tracer's sample), and four offset paths, one per neig
   same direction), Jacobian |cos_l'| d_b^2 / (|cos_l| d_o^2); it tests its own visibility (a
   blocked offset is a valid path that contributes 0).
 
+With a guide (grid, photon: maps by position, none per pixel) the base samples the path
+tracer's mixture a p_bsdf + (1 - a) p_guide, and every density of an offset (P_o in R, its NEE
+weights) is the mixture's at the offset's own vertex (shift.path_density): the density its own
+pixel's path tracer would sample it with, so the two sides' weights of a pair still sum to one.
+
 Weights. Each pair (p, p + e) is estimated from both sides; each estimate is weighted by the power
 heuristic over four techniques: the base's light and BSDF sampling and the neighbour's (the offset
 path's densities times the Jacobian). Path state keeps beta = F / P_b (F the product of f |cos|,
@@ -63,7 +68,7 @@ def warm_up(ctx, buf, roughness):
     surf = ctx.surfaces
     start_offsets(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, no_primary_samples(),
                   buf.key[:0], buf.pix[:0], *hb.offsets())
-    shift_offsets(idx, t, prim, b1, b2, buf.ray_d[:0], *surf, roughness, *hb.base(), *hb.offsets())
+    shift_offsets(idx, t, prim, b1, b2, buf.ray_d[:0], *surf, ctx.guide_state, roughness, *hb.base(), *hb.offsets())
     _shade(ctx, buf, hb, idx, buf.ray_d[:0], (t, prim, b1, b2), no_primary_samples(), roughness)
     _add_next_event(buf, hb, idx)
 
@@ -98,7 +103,7 @@ def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness):
         stats.rays += na
         t0 = stats.tick("intersect", t0)
         if bounce > 0:
-            shift_offsets(active, t, prim, b1, b2, rd, *surf, roughness, *hb.base(), *hb.offsets())
+            shift_offsets(active, t, prim, b1, b2, rd, *surf, ctx.guide_state, roughness, *hb.base(), *hb.offsets())
             t0 = stats.tick("shift", t0)
         # The offsets' own rays, and the visibility of their reconnections
         pi, po = np.nonzero(hb.trace[active])

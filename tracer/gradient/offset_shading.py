@@ -11,12 +11,13 @@ from .. import bsdfs
 from .._jit import jit, kernel
 from ..integrators.path import MAX_BOUNCES
 from ..lights import ENV_NONE, env_pdf, env_radiance, triangle_emission, triangle_light_pdf
-from ..rng import DIR, LIGHT, LIGHT_POS, LOBE, RR, bounce_dim, draw
+from ..guiding.contract import locate
+from ..rng import DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, draw
 from ..sampling import dot, frame, to_local, triangle_point
 from ..shading import emitted_env, emitted_surface, light_sample_at, offset_point, russian_roulette, sample_mixture
 from ..shading import shadow_ray, write_aovs, write_shadow
 from .offsets import BLOCKED, CONNECTED, TRACED
-from .shift import is_rough, reconnection
+from .shift import is_rough, path_density, reconnection
 
 # NeeTerms.mode of an offset at a bounce: no NEE term; the base's own weighted value alone (no
 # partner path); the partner shares the base's shadow ray (the offset sits at the base's vertex);
@@ -163,10 +164,17 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 else:
                     o_rough[i, o] = rough
 
+        # Where the guide's map is for the base (the path tracer's locate; a is 1 without one)
+        slot = -1
+        a = 1.0
+        if not delta and gs.res[0] > 0:
+            cos_o = -dot(wray, ng)
+            _, slot, a = locate(gs, x, ng if cos_o >= 0.0 else (-ng[0], -ng[1], -ng[2]), pix[i], dk)
+
         # NEE: the base's sample (the path tracer's), shifted to each offset
         if not delta:
             ls = light_sample_at(
-                mat_type, mat_param, m, lt, tri, x, ng, s, tt, wo, b, gs, -1, 1.0, tri_eps[p], tri_eps,
+                mat_type, mat_param, m, lt, tri, x, ng, s, tt, wo, b, gs, slot, a, tri_eps[p], tri_eps,
                 draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
                 draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)))
             ok, so, sd, tmax, contrib = ls.ok, ls.origin, ls.direction, ls.tmax, ls.contrib
@@ -226,7 +234,9 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                         plo = triangle_light_pdf(lt, lt_tri, disto * disto, cos_l)
                     wil = to_local(wlo, sy, ty, ngy)
                     fo = bsdfs.bsdf_eval(mat_type, mat_param, my, wo_o, wil, True)
-                    n_pbo[i, o] = bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wil)
+                    n_pbo[i, o] = path_density(gs, mat_type, mat_param, my, y, ngy,
+                                               (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]), wlo,
+                                               bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wil))
                     n_plo[i, o] = plo
                     n_rj[i, o] = o_R[i, o] * jl
                     for c in range(3):
@@ -243,16 +253,19 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                             o_sh_o[i, o, c] = oo[c]
                             o_sh_d[i, o, c] = od[c]
 
-        # The base's next direction (the path tracer's) and roulette
-        wiw, wt, pdf, _, dlt, _, _ = sample_mixture(
-            mat_type, mat_param, m, gs, -1, 1.0, wo, s, tt, ng, draw(ps, kk, i, bounce_dim(dk, DIR)),
-            draw(ps, kk, i, bounce_dim(dk, DIR + 1)), draw(ps, kk, i, bounce_dim(dk, LOBE)), 1.0)
+        # The base's next direction (the path tracer's, from the guide's mixture) and roulette
+        u_strategy = draw(ps, kk, i, bounce_dim(dk, STRATEGY)) if a < 1.0 else 1.0
+        u_lobe = 0.0 if a < 1.0 and u_strategy >= a else draw(ps, kk, i, bounce_dim(dk, LOBE))
+        wiw, wt, pdf, _, dlt, _, ratio = sample_mixture(
+            mat_type, mat_param, m, gs, slot, a, wo, s, tt, ng, draw(ps, kk, i, bounce_dim(dk, DIR)),
+            draw(ps, kk, i, bounce_dim(dk, DIR + 1)), u_lobe, u_strategy)
+        gn = gain[i] * ratio  # product of p_bsdf / p_mixture along the path (1 without a guide)
         nb = (b[0] * wt[0], b[1] * wt[1], b[2] * wt[2])
         bmax = max(nb[0], max(nb[1], nb[2]))
         go = bmax > 0.0 and math.isfinite(bmax)
         q = 1.0
         if go and dk + 1 >= rr_depth:
-            go, nb, q = russian_roulette(nb, 1.0, draw(ps, kk, i, bounce_dim(dk, RR)))
+            go, nb, q = russian_roulette(nb, gn, draw(ps, kk, i, bounce_dim(dk, RR)))
         if dk + 1 >= MAX_BOUNCES:
             go = False
         if not go:
@@ -272,6 +285,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         b_pdf[i] = pdf
         b_delta[i] = dlt
         b_rough[i] = rough and not dlt
+        gain[i] = gn
         depth[i] = dk + 1
         prev_pdf[i] = pdf
         prev_delta[i] = dlt

@@ -14,7 +14,7 @@ from ..camera import camera_ray
 from ..rng import DIM_PIXEL, draw
 from ..sampling import dot, frame, to_local, to_world, triangle_point
 from ..shading import offset_point
-from .shift import is_rough, half_vector_shift, reconnection
+from .shift import half_vector_shift, is_rough, path_density, reconnection
 
 
 # offset status: own vertex; reconnected one bounce ago; the base's vertices; reconnected through an
@@ -184,13 +184,14 @@ def _finite(o_beta, o_R, i, o):
 
 @kernel
 def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param,
-                  roughness, b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
+                  gs, roughness, b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
                   o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights, o_trace,
                   o_reconn, o_ray_o, o_ray_d, o_tmax, G, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o, o_sh_d,
                   o_sh_tmax):
     """Shift each offset (the Offsets o_*) across the base's last bounce x_i -> x_{i+1} (the
     BaseBounce b_*; entry k: path active[k], its ray ray_d[k] and hit t, prim, b1, b2; the
-    scene's Surfaces): reconnection (a visibility ray to test, o_reconn) or half-vector
+    scene's Surfaces; gs: the guide's state, whose mixture gives an offset the density its own
+    pixel's path tracer would, shift.path_density): reconnection (a visibility ray to test, o_reconn) or half-vector
     copy (a ray to trace, o_trace); updates beta_o, R, and the offset's last density. o_lights: whether
     the pair's weights for this bounce count the light techniques (not after a half-vector copy, whose
     pairs take no NEE either: NEE reconnects, and both techniques must map a path to the same partner)."""
@@ -224,9 +225,11 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material,
                 o_delta[i, o] = b_delta[i]
                 continue
             if st == RECENT:  # at x_i with its own incoming direction
-                wo_o = to_local((o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]), sx, tx, ngx)
+                wo_w = (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2])
+                wo_o = to_local(wo_w, sx, tx, ngx)
                 f = bsdfs.bsdf_eval(mat_type, mat_param, mx, wo_o, wi_b, True)
-                po = bsdfs.bsdf_pdf(mat_type, mat_param, mx, wo_o, wi_b)
+                po = path_density(gs, mat_type, mat_param, mx, (b_x[i, 0], b_x[i, 1], b_x[i, 2]), ngx, wo_w, wib_w,
+                                  bsdfs.bsdf_pdf(mat_type, mat_param, mx, wo_o, wi_b))
                 if not po > 0.0:
                     o_alive[i, o] = False
                     continue
@@ -258,7 +261,8 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material,
                     d2 = dist * dist
                 wi_o = to_local(wn, sy, ty, ngy)
                 f = bsdfs.bsdf_eval(mat_type, mat_param, my, wo_o, wi_o, True)
-                po = bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wi_o)
+                po = path_density(gs, mat_type, mat_param, my, y, ngy, (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]),
+                                  wn, bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wi_o))
                 if not (po > 0.0 and math.isfinite(jac)):
                     o_alive[i, o] = False
                     continue
@@ -300,6 +304,9 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material,
                 o_alive[i, o] = False
                 continue
             wiw = to_world(wi_o, sy, ty, ngy)
+            if not b_delta[i]:
+                po = path_density(gs, mat_type, mat_param, my, y, ngy, (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]),
+                                  wiw, po)
             org = offset_point(y, ngy, wiw, tri_eps[py])
             for c in range(3):
                 o_beta[i, o, c] *= f[c] * jac / pb

@@ -7,7 +7,9 @@ import math
 
 from .. import bsdfs
 from .._jit import jit
+from ..guiding.contract import locate
 from ..sampling import dot
+from ..shading import mixture_pdf
 
 
 @jit(inline="always")
@@ -34,6 +36,20 @@ def reconnection(x, y, z, nz):
     if not (cos_x > 0.0 and cos_y > 0.0):
         return w, dist, 0.0
     return w, dist, cos_y * db2 / (cos_x * d2)
+
+
+@jit(inline="always")
+def path_density(gs, mat_type, mat_param, m, x, ng, wo_w, wi_w, pb):
+    """The density the path tracer samples world direction wi_w with at vertex x (material m,
+    geometric normal ng) reached from world direction wo_w (pointing back along the path), given
+    the BSDF's own density pb: pb, or with a guide's map there the mixture a pb + (1 - a) p_guide
+    (integrators.path.shade's, for guides without per-pixel maps). What makes an offset's density
+    the one its own pixel's path tracer would give it."""
+    if gs.res[0] == 0 or bsdfs.bsdf_is_delta(mat_type, mat_param, m):
+        return pb
+    nf = ng if dot(wo_w, ng) >= 0.0 else (-ng[0], -ng[1], -ng[2])
+    _, slot, a = locate(gs, x, nf, -1, 1)
+    return mixture_pdf(gs, slot, a, pb, wi_w)
 
 
 @jit(inline="always")

@@ -51,6 +51,7 @@ class Guide:
     train_budget = 1.0  # with a time budget: share of it that learning may take
     splitting = None  # splitting.WeightWindow, or None (never splits)
     camera_paths = True  # final passes start at the camera (False: from the guide's own source, e.g. pss's warp)
+    pixel_maps = False  # the state holds per-pixel first-bounce maps (GuideState.pixel_slot)
     time_learning = 0.0  # seconds spent observing and learning
     time_update = 0.0  # seconds spent rebuilding maps between passes
     time_inference = 0.0  # seconds of network inference

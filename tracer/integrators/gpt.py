@@ -20,8 +20,9 @@ class GptIntegrator(Integrator):
     """`--integrator gpt`: gradient-domain path tracing, reconstructed by `recon`.
 
     shift        hybrid (reconnection between vertices rougher than `roughness`, half-vector copy
-                 elsewhere; the default without a guide) or replay (the same random numbers from the
-                 neighbouring pixel; the default with a guide)
+                 elsewhere; every offset with its own pixel's mixture density) or replay (the same
+                 random numbers from the neighbouring pixel; the default for odis, whose per-pixel
+                 first-bounce maps the hybrid shift does not shift)
     recon        l2 (keeps the image mean), l1 (darker at low spp), gradnet (learned; `weights`,
                  `correction` 0/1) or none (the base image); recon_alpha: the base's weight
     nee          1: next-event estimation with MIS; 0: none (replay shift only)
@@ -51,12 +52,12 @@ class GptIntegrator(Integrator):
     def check_guide(self, guide, guide_name):
         if guide is None:
             return
-        if self.shift == "hybrid" and "shift" not in self.given:
-            self.shift = "replay"  # the default shift with a guide: the hybrid one samples the BSDF only
-        if self.shift == "hybrid":
-            raise SettingsError(f"integrator gpt: the hybrid shift samples the BSDF only; with --guide {guide_name} "
-                                "use gpt:shift=replay")
-        if not getattr(guide, "camera_paths", True):
+        if self.shift == "hybrid" and guide.pixel_maps:
+            if "shift" in self.given:
+                raise SettingsError(f"integrator gpt: the hybrid shift takes guides without per-pixel maps; with "
+                                    f"--guide {guide_name} use gpt:shift=replay")
+            self.shift = "replay"  # (the default shift for a guide with per-pixel maps)
+        if not guide.camera_paths:
             raise SettingsError(f"integrator gpt traces its own camera paths; guide {guide_name!r} warps them "
                                 "(use integrator path)")
 

@@ -239,6 +239,8 @@ class OdisGuide(Guide):
     """`--guide odis`: the first bounce sampled from incident-radiance maps that a network trained
     offline reconstructs from an initial pass (Bako et al. 2019)."""
 
+    pixel_maps = True
+
     name = "odis"
     learns = False  # the initial pass records vertices, but nothing is learned per scene
     # memory (tracer.memory): the per-pixel sampling tables (32 x 32 uint16 densities and row sums,
