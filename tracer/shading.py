@@ -9,6 +9,7 @@ guide mixture exist once:
     sample_mixture / mixture_pdf    the direction from the one-sample MIS mixture of BSDF and guide
                                     (practical path guiding's sampleMat / pdfMat), and its density
     russian_roulette                continue or end, on the throughput BSDF sampling would have had
+    next_bounce                     the two together, with their random numbers: a path's next step
 
 Conventions: directions are unit 3-tuples; `wo`, `wi` in the local shading frame (s, t, n) of
 tracer.sampling.frame unless named `*w` (world); densities are per unit solid angle; colours are
@@ -24,6 +25,7 @@ from . import bsdfs
 from ._jit import jit
 from .guiding.contract import slot_pdf, slot_sample
 from .lights import env_pdf, env_radiance, sample_light, triangle_emission, triangle_light_pdf
+from .rng import DIR, LOBE, RR, STRATEGY, bounce_dim, draw
 from .sampling import dot, power_heuristic, to_local, to_world
 
 BLACK = (0.0, 0.0, 0.0)
@@ -223,3 +225,43 @@ def russian_roulette(beta, gain, u):
     if u >= q:
         return False, beta, q
     return True, (beta[0] / q, beta[1] / q, beta[2] / q), q
+
+
+class NextBounce(NamedTuple):
+    """What next_bounce returns."""
+
+    ok: bool  # the path goes on
+    wi: tuple  # the sampled world direction
+    weight: tuple  # f cos / pdf (RGB)
+    pdf: float  # the mixture's density of wi (a delta lobe's probability)
+    pdf_bsdf: float  # the BSDF's own density of wi
+    delta: bool  # sampled from a delta lobe
+    strategy: int  # 0 BSDF, 1 guide
+    beta: tuple  # the throughput after the bounce and the roulette
+    gain: float  # product of p_bsdf / p_mixture along the path (1 without a guide)
+    q: float  # the roulette's survival probability (1: no roulette)
+
+
+@jit(inline="always")
+def next_bounce(mat_type, mat_param, m, gs, slot, a, wo, s, t, ng, beta, gain, depth, rr_depth, max_bounces, ps, key,
+                row):
+    """A path's next step at a vertex of material m (local frame s, t, ng; outgoing wo local) after
+    `depth` bounces, with throughput beta and gain so far: the direction from the mixture of the
+    guide's map `slot` (probability 1 - a) and the BSDF, its random numbers drawn for path `row`
+    of stream `key` (rng.draw: STRATEGY where a < 1, LOBE where the BSDF samples, DIR, DIR + 1),
+    then Russian roulette from rr_depth on (RR) and the cap max_bounces. A NextBounce."""
+    u_strategy = draw(ps, key, row, bounce_dim(depth, STRATEGY)) if a < 1.0 else 1.0
+    u_lobe = 0.0 if a < 1.0 and u_strategy >= a else draw(ps, key, row, bounce_dim(depth, LOBE))  # BSDF only
+    wiw, wt, pdf, pbs, dlt, strategy, ratio = sample_mixture(
+        mat_type, mat_param, m, gs, slot, a, wo, s, t, ng, draw(ps, key, row, bounce_dim(depth, DIR)),
+        draw(ps, key, row, bounce_dim(depth, DIR + 1)), u_lobe, u_strategy)
+    gn = gain * ratio
+    nb = (beta[0] * wt[0], beta[1] * wt[1], beta[2] * wt[2])
+    bmax = max(nb[0], max(nb[1], nb[2]))
+    ok = bmax > 0.0 and math.isfinite(bmax)
+    q = 1.0
+    if ok and depth + 1 >= rr_depth:
+        ok, nb, q = russian_roulette(nb, gn, draw(ps, key, row, bounce_dim(depth, RR)))
+    if depth + 1 >= max_bounces:
+        ok = False
+    return NextBounce(ok, wiw, wt, pdf, pbs, dlt, strategy, nb, gn, q)

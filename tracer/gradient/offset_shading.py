@@ -3,8 +3,6 @@ emission and next-event estimation weighted over the four techniques of each pix
 base's next direction; add_next_event adds the NEE terms once the shadow rays are known. The
 weights are derived in hybrid.py's docstring."""
 
-import math
-
 from numba import prange
 
 from .. import bsdfs
@@ -12,9 +10,9 @@ from .._jit import jit, kernel
 from ..integrators.path import MAX_BOUNCES
 from ..lights import ENV_NONE, env_pdf, env_radiance, triangle_emission, triangle_light_pdf
 from ..guiding.contract import locate
-from ..rng import DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, draw
+from ..rng import LIGHT, LIGHT_POS, bounce_dim, draw
 from ..sampling import dot, frame, to_local, triangle_point
-from ..shading import emitted_env, emitted_surface, light_sample_at, offset_point, russian_roulette, sample_mixture
+from ..shading import emitted_env, emitted_surface, light_sample_at, next_bounce, offset_point
 from ..shading import shadow_ray, write_aovs, write_shadow
 from .offsets import BLOCKED, CONNECTED, TRACED
 from .shift import is_rough, path_density, reconnection
@@ -253,23 +251,12 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                             o_sh_o[i, o, c] = oo[c]
                             o_sh_d[i, o, c] = od[c]
 
-        # The base's next direction (the path tracer's, from the guide's mixture) and roulette
-        u_strategy = draw(ps, kk, i, bounce_dim(dk, STRATEGY)) if a < 1.0 else 1.0
-        u_lobe = 0.0 if a < 1.0 and u_strategy >= a else draw(ps, kk, i, bounce_dim(dk, LOBE))
-        wiw, wt, pdf, _, dlt, _, ratio = sample_mixture(
-            mat_type, mat_param, m, gs, slot, a, wo, s, tt, ng, draw(ps, kk, i, bounce_dim(dk, DIR)),
-            draw(ps, kk, i, bounce_dim(dk, DIR + 1)), u_lobe, u_strategy)
-        gn = gain[i] * ratio  # product of p_bsdf / p_mixture along the path (1 without a guide)
-        nb = (b[0] * wt[0], b[1] * wt[1], b[2] * wt[2])
-        bmax = max(nb[0], max(nb[1], nb[2]))
-        go = bmax > 0.0 and math.isfinite(bmax)
-        q = 1.0
-        if go and dk + 1 >= rr_depth:
-            go, nb, q = russian_roulette(nb, gn, draw(ps, kk, i, bounce_dim(dk, RR)))
-        if dk + 1 >= MAX_BOUNCES:
-            go = False
-        if not go:
+        # The base's next direction and roulette (the path tracer's, from the guide's mixture)
+        nx = next_bounce(mat_type, mat_param, m, gs, slot, a, wo, s, tt, ng, b, gain[i], dk, rr_depth, MAX_BOUNCES,
+                         ps, kk, i)
+        if not nx.ok:
             continue
+        wiw, wt, pdf, dlt, nb, gn, q = nx.wi, nx.weight, nx.pdf, nx.delta, nx.beta, nx.gain, nx.q
         no = offset_point(x, ng, wiw, tri_eps[p])
         for c in range(3):
             beta[i, c] = nb[c]

@@ -25,7 +25,6 @@ Depths follow Mitsuba 3: `max_depth` 1 shows emitters seen directly, 2 adds dire
 bounce numbered `rr_depth` on, continuing with probability min(max(beta / gain), 0.95), where
 beta / gain is the throughput BSDF sampling would have given (shading.russian_roulette).
 """
-import math
 import time
 
 import numpy as np
@@ -36,10 +35,9 @@ from ..film import aovs_of, combine_films
 from ..guiding.records import finalize_records
 from ..guiding.contract import locate
 from ..lights import ENV_NONE
-from ..rng import DIR, LIGHT, LIGHT_POS, LOBE, RR, STRATEGY, bounce_dim, draw
+from ..rng import LIGHT, LIGHT_POS, bounce_dim, draw
 from ..sampling import dot, frame, to_local, triangle_point
-from ..shading import (emitted_env, emitted_surface, next_event, offset_point, russian_roulette, sample_mixture,
-                      write_aovs, write_shadow)
+from ..shading import (emitted_env, emitted_surface, next_bounce, next_event, offset_point, write_aovs, write_shadow)
 from ..splitting import merge_copies, split_wave
 from ..result import RenderResult, report_dark
 from ..wave import add_unoccluded, compact, sanitize
@@ -156,22 +154,12 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             if ok:
                 write_shadow(k, so, sd, tmax, contrib, sh_o, sh_d, sh_tmax, sh_L, has_shadow)
 
-        # Sample the continuation from the mixture: the guide with probability 1 - a, else the BSDF
-        u_strategy = draw(ps, kk, i, bounce_dim(dk, STRATEGY)) if a < 1.0 else 1.0
-        u_lobe = 0.0 if a < 1.0 and u_strategy >= a else draw(ps, kk, i, bounce_dim(dk, LOBE))  # BSDF only
-        wiw, wt, pdf, pbs, dlt, strategy, ratio = sample_mixture(
-            mat_type, mat_param, m, gs, slot, a, wo, s, tt, ng, draw(ps, kk, i, bounce_dim(dk, DIR)),
-            draw(ps, kk, i, bounce_dim(dk, DIR + 1)), u_lobe, u_strategy)
-        gn = gain[i] * ratio  # product of p_bsdf / p_mixture along the path (1 without a guide)
-        nb = (b[0] * wt[0], b[1] * wt[1], b[2] * wt[2])
-        bmax = max(nb[0], max(nb[1], nb[2]))
-        ok = bmax > 0.0 and math.isfinite(bmax)
-
-        # Possibly terminate the path with Russian roulette
-        if ok and dk + 1 >= rr_depth:
-            ok, nb, _ = russian_roulette(nb, gn, draw(ps, kk, i, bounce_dim(dk, RR)))
-        if dk + 1 >= MAX_BOUNCES:
-            ok = False
+        # The continuation from the mixture (the guide with probability 1 - a, else the BSDF), then
+        # possibly the end of the path by Russian roulette
+        nx = next_bounce(mat_type, mat_param, m, gs, slot, a, wo, s, tt, ng, b, gain[i], dk, rr_depth, MAX_BOUNCES,
+                         ps, kk, i)
+        ok, wiw, wt, pdf, pbs, dlt, strategy = nx.ok, nx.wi, nx.weight, nx.pdf, nx.pdf_bsdf, nx.delta, nx.strategy
+        nb, gn = nx.beta, nx.gain
 
         # Record the vertex for a guide that learns (also when the path ends here: its radiance is 0)
         last = -1
