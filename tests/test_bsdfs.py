@@ -290,7 +290,7 @@ def test_mirror():
     assert np.all(pdf == 1.0) and np.all(delta)
     assert np.all(B.eval_batch(*mat, 0, wo, wi, True) == 0.0)
     assert np.all(B.pdf_batch(*mat, 0, wo, wi) == 0.0)
-    assert B.bsdf_is_delta(*mat, 0)
+    assert B.bsdf_is_delta(B.bsdf_row(*mat, 0))
     # Grazing wo (in the surface plane) gives no sample
     flat = np.array([[1.0, 0, 0]])
     wi, beta, pdf, delta = B.sample_batch(*mat, 0, flat, np.full((1, 3), 0.5), True)
@@ -453,10 +453,10 @@ def test_is_delta_and_albedo():
     assert [B.TYPE_NAMES[k] for k in kinds] == list(B.TYPE_NAMES)
     mat_type = np.array(kinds, dtype=np.int32)
     mat_param = np.tile([*KD, *KS, 1e-5, 1.5], (6, 1))
-    assert [B.bsdf_is_delta(mat_type, mat_param, m) for m in range(6)] == [
+    assert [B.bsdf_is_delta(B.bsdf_row(mat_type, mat_param, m)) for m in range(6)] == [
         False, False, True, True, False, False,
     ]
-    albedo = [B.bsdf_albedo(mat_type, mat_param, m) for m in range(6)]
+    albedo = [B.bsdf_albedo(B.bsdf_row(mat_type, mat_param, m)) for m in range(6)]
     assert albedo[0] == KD and albedo[1] == KS and albedo[2] == KS
     assert albedo[3] == (1.0, 1.0, 1.0) and albedo[4] == (1.0, 1.0, 1.0)
     np.testing.assert_allclose(albedo[5], np.minimum(np.add(KD, KS), 1.0))

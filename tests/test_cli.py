@@ -145,7 +145,8 @@ def test_missing_mtl(tmp_path, capsys):
 
 
 def test_missing_texture_is_a_warning(tmp_path, capsys):
-    """Textures are replaced by the constant anyway: a missing one is reported, not an error."""
+    """A missing texture is one warning naming the MTL line and the file, with the constant used
+    instead: not an error."""
     obj = scenes.light_quad(tmp_path, (1, 1, 1))
     with open(tmp_path / "lamp.mtl", "a") as f:
         f.write("map_Kd wood.png\n")

@@ -21,7 +21,10 @@ SHARED = sorted(glob.glob(os.path.join(ROOT, "..", "shared", "scenes", "*", "*.o
 def _slow(path):
     scan = O.scan_obj(path)
     tri, groups = O._load_geometry(path, scan)
-    return tri, groups, scan.mtllibs, scan.usemtl
+    warnings = []
+    uv, normals = O._corner_attributes(path, scan, tri, groups, warnings)
+    assert not warnings
+    return tri, groups, scan.mtllibs, scan.usemtl, uv, normals
 
 
 def _same(path):
@@ -31,7 +34,12 @@ def _same(path):
     slow = _slow(path)
     assert fast[0].shape == slow[0].shape
     assert np.array_equal(fast[0], slow[0])  # bit for bit, in the same order
-    assert fast[1:] == slow[1:]
+    assert tuple(fast[1:4]) == slow[1:4]
+    for a, b in zip(fast[4:], slow[4:]):  # corner UVs and normals, bit for bit
+        assert (a is None) == (b is None)
+        if a is not None:
+            assert np.array_equal(a, b)
+    return fast
 
 
 @pytest.mark.parametrize("path", SHIPPED + SHARED, ids=lambda p: os.path.basename(os.path.dirname(p)))
@@ -67,7 +75,9 @@ def test_statements_match_trimesh(tmp_path, pattern, style):
     rng = np.random.default_rng(style * 10 + pattern)
     v = rng.normal(size=(30, 3)) * 10.0 ** rng.integers(-3, 4, size=(30, 1))
     lines = ["# made by the test", "mtllib m.mtl"] + [_vertex(p, style) for p in v]
-    lines += ["vn 0 0 1", "vt 0 0", _face((1, 2, 3), pattern), "usemtl light", "o part", "s off",
+    lines += ["vn %.17g %.17g %.17g" % tuple(n) for n in rng.normal(size=(30, 3))]
+    lines += ["vt %.17g %.17g" % tuple(t) for t in rng.random((29, 2))] + ["vt 0.5"]  # v defaults to 0
+    lines += [_face((1, 2, 3), pattern), "usemtl light", "o part", "s off",
               _face((1, 2, 3, 4), pattern), _face((4, 5, 6, 7, 8), pattern), _face((9, 10, 11), pattern),
               "usemtl B", "g grp", _face((5, 6, 7, 8), pattern), _face((9, 10, 11, 12), pattern),
               "usemtl C", _face((1, 5, 9), pattern), "", "   ", "usemtl light", _face((13, 14, 15), pattern),
@@ -76,7 +86,8 @@ def test_statements_match_trimesh(tmp_path, pattern, style):
     (tmp_path / "m.mtl").write_text("newmtl light\nKe 1 1 1\nnewmtl B\nKd 0.5 0.5 0.5\n")
     path = tmp_path / "s.obj"
     path.write_bytes(end.join(lines).encode())
-    _same(str(path))
+    mesh = _same(str(path))
+    assert (mesh.uv is not None) == (pattern in (2, 4)) and (mesh.normals is not None) == (pattern in (3, 4))
 
 
 def test_numbers_are_parsed_as_float_does():
@@ -118,6 +129,9 @@ def test_declines_what_it_cannot_match(text):
     ("v 0 0 0\nv 1 0 0\nf 1 2 3\nv 0 1 0\n", ":3: face refers to vertex 3, but 2 vertices are defined"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", ":4: a face needs at least 3 vertices"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", ":4: face refers to vertex 0"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n", ":5: face refers to texture coordinate 2"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//2\n", ":5: face refers to normal 2"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0\nf 1//1 2//1 3//1\n", ":4: malformed vn line"),
 ])
 def test_bad_lines_are_named_by_the_slow_check(tmp_path, text, message):
     """The fast reader declines a bad file; load_scene's error then names the line."""
@@ -136,3 +150,23 @@ def test_triangle_areas_against_numpy():
     want = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     assert np.array_equal(area2, want)
     assert np.array_equal(bounds, np.stack([tri.reshape(-1, 3).min(0), tri.reshape(-1, 3).max(0)]))
+
+
+def test_uvs_and_normals_through_the_slow_path(tmp_path):
+    """A line statement sends a file down the slow path (scan + trimesh); its corner UVs and normals
+    must equal the fast reader's on the same file without it (detects texture or normal indices
+    resolved against the wrong list, or corners matched to the wrong triangle)."""
+    rng = np.random.default_rng(7)
+    head = "".join("v %.17g %.17g %.17g\n" % tuple(p) for p in rng.normal(size=(6, 3)))
+    head += "".join("vt %.17g %.17g\n" % tuple(t) for t in rng.random((6, 2)))
+    head += "".join("vn %.17g %.17g %.17g\n" % tuple(n) for n in rng.normal(size=(6, 3)))
+    faces = [(1, 2, 3, 4), (4, 5, 6)]
+    absolute = head + "".join("f " + " ".join(f"{i}/{7 - i}/{i}" for i in f) + "\n" for f in faces)
+    relative = head + "l 1 2\n" + "".join("f " + " ".join(f"{i}/{7 - i}/{i}" for i in f) + "\n" for f in faces)
+    fast = read_obj(absolute.encode())
+    assert read_obj(relative.encode()) is None
+    path = tmp_path / "rel.obj"
+    path.write_text(relative)
+    slow = O.read_geometry(str(path), [])
+    assert np.array_equal(slow.tri, fast.tri)
+    assert np.array_equal(slow.uv, fast.uv) and np.array_equal(slow.normals, fast.normals)

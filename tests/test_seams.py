@@ -321,14 +321,13 @@ def test_kernel_parameters_follow_their_bundles():
     a signature (which would compile and run) fail here."""
     import inspect
 
-    from tracer.context import Surfaces
     from tracer.gradient.offset_shading import add_next_event, shade_hybrid
     from tracer.gradient.offsets import BaseBounce, NeeTerms, Offsets, shift_offsets, start_offsets
     from tracer.guiding.records import Records
     from tracer.integrators.path import shade
     from tracer.wave import Continuation, PathState, ShadowQueue, ShadowRays, compact
 
-    surf = _names(Surfaces, special={"normal": "tri_normal", "material": "tri_material", "eps": "tri_eps"})
+    surf = ["surf"]  # material.Surfaces travels whole: the kernels only read it
     shadow = _names(ShadowRays, "sh_", {"has": "has_shadow"})
     offsets = _names(Offsets, "o_", {f: f for f in ("G", "hit_t", "hit_prim", "hit_b1", "hit_b2")})
     nee = _names(NeeTerms, "n_", {"vis_b": "vis_b", "vis": "vis"})

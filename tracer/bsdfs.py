@@ -5,7 +5,9 @@ Materials are a struct of arrays shared with the scene loader and the integrator
     mat_type  : (M,) int32, one of the type constants below
     mat_param : (M, 8) float64, columns [kd_r, kd_g, kd_b, ks_r, ks_g, ks_b, alpha, ior]
 
-Every function takes `(mat_type, mat_param, m, ...)` with `m` the material index.
+Every function takes the BSDF at one point, `bp = (type, params)`: the type constant and the
+eight columns above as a tuple, with textures already evaluated there (tracer.material.surface_at
+makes it at a hit; `bsdf_row` from a table row).
 
 Frames and measures
 -------------------
@@ -87,18 +89,26 @@ def _scale3(a, s):
 
 
 @jit
-def _kd(mat_param, m):
-    return (mat_param[m, 0], mat_param[m, 1], mat_param[m, 2])
+def bsdf_row(mat_type, mat_param, m):
+    """The BSDF of material m as its table row gives it, untextured: (type, params), the form
+    every function below takes (tracer.material.surface_at gives the one at a hit point)."""
+    return (mat_type[m], (mat_param[m, 0], mat_param[m, 1], mat_param[m, 2], mat_param[m, 3], mat_param[m, 4],
+                          mat_param[m, 5], mat_param[m, 6], mat_param[m, 7]))
 
 
 @jit
-def _ks(mat_param, m):
-    return (mat_param[m, 3], mat_param[m, 4], mat_param[m, 5])
+def _kd(prm):
+    return (prm[0], prm[1], prm[2])
 
 
 @jit
-def _alpha(mat_param, m):
-    return max(mat_param[m, 6], ALPHA_MIN)
+def _ks(prm):
+    return (prm[3], prm[4], prm[5])
+
+
+@jit
+def _alpha(prm):
+    return max(prm[6], ALPHA_MIN)
 
 
 # --- Fresnel -----------------------------------------------------------------------------------
@@ -464,7 +474,7 @@ def _plastic_sample(kd, ks, alpha, wo, u0, u1, u2):
 
 # --- Public interface: dispatch on the material type -------------------------------------------
 @jit
-def bsdf_sample(mat_type, mat_param, m, wo, u0, u1, u2, radiance):
+def bsdf_sample(bp, wo, u0, u1, u2, radiance):
     """Importance-sample wi for material m given wo (local frame).
 
     u0, u1 pick the direction, u2 the lobe. Returns (wi, weight, pdf, delta):
@@ -473,102 +483,102 @@ def bsdf_sample(mat_type, mat_param, m, wo, u0, u1, u2, radiance):
     discrete probability); delta True when wi came from a delta lobe. A failed sample returns
     wi = weight = (0, 0, 0), pdf 0, delta False.
     """
-    t = mat_type[m]
+    t, prm = bp
     if t == DIFFUSE:
-        return _diffuse_sample(_kd(mat_param, m), wo, u0, u1)
+        return _diffuse_sample(_kd(prm), wo, u0, u1)
     if t == CONDUCTOR:
-        return _conductor_sample(_ks(mat_param, m), _alpha(mat_param, m), wo, u0, u1)
+        return _conductor_sample(_ks(prm), _alpha(prm), wo, u0, u1)
     if t == MIRROR:
-        return _mirror_sample(_ks(mat_param, m), wo)
+        return _mirror_sample(_ks(prm), wo)
     if t == DIELECTRIC:
-        return _dielectric_sample(mat_param[m, 7], wo, u2, radiance)
+        return _dielectric_sample(prm[7], wo, u2, radiance)
     if t == ROUGH_DIELECTRIC:
         return _rough_dielectric_sample(
-            _alpha(mat_param, m), mat_param[m, 7], wo, u0, u1, u2, radiance
+            _alpha(prm), prm[7], wo, u0, u1, u2, radiance
         )
     if t == PLASTIC:
         return _plastic_sample(
-            _kd(mat_param, m), _ks(mat_param, m), _alpha(mat_param, m), wo, u0, u1, u2
+            _kd(prm), _ks(prm), _alpha(prm), wo, u0, u1, u2
         )
     return _fail()
 
 
 @jit
-def bsdf_eval(mat_type, mat_param, m, wo, wi, radiance):
+def bsdf_eval(bp, wo, wi, radiance):
     """f(wo, wi) |cos wi| as a 3-tuple (local frame); (0, 0, 0) for delta materials."""
-    t = mat_type[m]
+    t, prm = bp
     if t == DIFFUSE:
-        return _diffuse_eval(_kd(mat_param, m), wo, wi)
+        return _diffuse_eval(_kd(prm), wo, wi)
     if t == CONDUCTOR:
-        return _conductor_eval(_ks(mat_param, m), _alpha(mat_param, m), wo, wi)
+        return _conductor_eval(_ks(prm), _alpha(prm), wo, wi)
     if t == ROUGH_DIELECTRIC:
         fcos, _ = _rough_dielectric_eval_pdf(
-            _alpha(mat_param, m), mat_param[m, 7], wo, wi, radiance
+            _alpha(prm), prm[7], wo, wi, radiance
         )
         return (fcos, fcos, fcos)
     if t == PLASTIC:
         fcos, _ = _plastic_eval_pdf(
-            _kd(mat_param, m), _ks(mat_param, m), _alpha(mat_param, m), wo, wi
+            _kd(prm), _ks(prm), _alpha(prm), wo, wi
         )
         return fcos
     return _ZERO3
 
 
 @jit
-def bsdf_pdf(mat_type, mat_param, m, wo, wi):
+def bsdf_pdf(bp, wo, wi):
     """Solid-angle density with which `bsdf_sample` produces wi; 0 for delta materials."""
-    t = mat_type[m]
+    t, prm = bp
     if t == DIFFUSE:
         return _diffuse_pdf(wo, wi)
     if t == CONDUCTOR:
-        return _microfacet_reflection_pdf(_alpha(mat_param, m), wo, wi)
+        return _microfacet_reflection_pdf(_alpha(prm), wo, wi)
     if t == ROUGH_DIELECTRIC:
-        _, pdf = _rough_dielectric_eval_pdf(_alpha(mat_param, m), mat_param[m, 7], wo, wi, True)
+        _, pdf = _rough_dielectric_eval_pdf(_alpha(prm), prm[7], wo, wi, True)
         return pdf
     if t == PLASTIC:
         _, pdf = _plastic_eval_pdf(
-            _kd(mat_param, m), _ks(mat_param, m), _alpha(mat_param, m), wo, wi
+            _kd(prm), _ks(prm), _alpha(prm), wo, wi
         )
         return pdf
     return 0.0
 
 
 @jit
-def bsdf_is_delta(mat_type, mat_param, m):
+def bsdf_is_delta(bp):
     """True for materials that only scatter into discrete directions (MIRROR, DIELECTRIC)."""
-    t = mat_type[m]
+    t, prm = bp
     return t == MIRROR or t == DIELECTRIC
 
 
 @jit
-def bsdf_roughness(mat_type, mat_param, m):
+def bsdf_roughness(bp):
     """The smallest roughness of material m's lobes (the gradient-domain tracer's hybrid shift
     reconnects only between rough vertices): inf for diffuse, the GGX alpha for conductor, rough
     dielectric and plastic (its specular lobe), 0 for the delta materials."""
-    t = mat_type[m]
+    t, prm = bp
     if t == DIFFUSE:
         return math.inf
     if t == CONDUCTOR or t == ROUGH_DIELECTRIC or t == PLASTIC:
-        return _alpha(mat_param, m)
+        return _alpha(prm)
     return 0.0
 
 
 @jit
-def delta_lobe(mat_type, mat_param, m, wo, transmit, radiance):
+def delta_lobe(bp, wo, transmit, radiance):
     """The delta lobe of material m that reflects wo (transmit False) or refracts it (True), as
     bsdf_sample would pick it: (wi, value f |cos| in the discrete measure, probability that
     bsdf_sample picks this lobe). Probability 0 where there is no such lobe (a material that is not
     delta, total internal reflection, a grazing wo)."""
-    t = mat_type[m]
+    t, prm = bp
     if wo[2] == 0.0:
         return _ZERO3, _ZERO3, 0.0
     if t == MIRROR:
         if transmit:
             return _ZERO3, _ZERO3, 0.0
-        return (-wo[0], -wo[1], wo[2]), _ks(mat_param, m), 1.0
-    if t != DIELECTRIC or not mat_param[m, 7] > 0.0:
+        return (-wo[0], -wo[1], wo[2]), _ks(prm), 1.0
+    if t != DIELECTRIC or not prm[7] > 0.0:
         return _ZERO3, _ZERO3, 0.0
-    ior = mat_param[m, 7]
+    ior = prm[7]
     sgn = 1.0 if wo[2] > 0.0 else -1.0
     eta = ior if wo[2] > 0.0 else 1.0 / ior
     f, cos_t = fresnel_dielectric(abs(wo[2]), eta)
@@ -581,18 +591,18 @@ def delta_lobe(mat_type, mat_param, m, wo, transmit, radiance):
 
 
 @jit
-def bsdf_albedo(mat_type, mat_param, m):
+def bsdf_albedo(bp):
     """A cheap albedo 3-tuple for the AOV: kd; ks (metals); min(kd + ks, 1) (plastic); 1 (glass)."""
-    t = mat_type[m]
+    t, prm = bp
     if t == DIFFUSE:
-        return _kd(mat_param, m)
+        return _kd(prm)
     if t == CONDUCTOR or t == MIRROR:
-        return _ks(mat_param, m)
+        return _ks(prm)
     if t == PLASTIC:
         return (
-            min(mat_param[m, 0] + mat_param[m, 3], 1.0),
-            min(mat_param[m, 1] + mat_param[m, 4], 1.0),
-            min(mat_param[m, 2] + mat_param[m, 5], 1.0),
+            min(prm[0] + prm[3], 1.0),
+            min(prm[1] + prm[4], 1.0),
+            min(prm[2] + prm[5], 1.0),
         )
     if t == DIELECTRIC or t == ROUGH_DIELECTRIC:
         return (1.0, 1.0, 1.0)
@@ -615,7 +625,7 @@ def sample_batch(mat_type, mat_param, m, wo, u, radiance):
     delta = np.empty(n, dtype=np.bool_)
     for k in prange(n):
         w, b, p, d = bsdf_sample(
-            mat_type, mat_param, m, (wo[k, 0], wo[k, 1], wo[k, 2]), u[k, 0], u[k, 1], u[k, 2],
+            bsdf_row(mat_type, mat_param, m), (wo[k, 0], wo[k, 1], wo[k, 2]), u[k, 0], u[k, 1], u[k, 2],
             radiance,
         )
         for c in range(3):
@@ -633,7 +643,7 @@ def eval_batch(mat_type, mat_param, m, wo, wi, radiance):
     out = np.empty((n, 3))
     for k in prange(n):
         f = bsdf_eval(
-            mat_type, mat_param, m, (wo[k, 0], wo[k, 1], wo[k, 2]), (wi[k, 0], wi[k, 1], wi[k, 2]),
+            bsdf_row(mat_type, mat_param, m), (wo[k, 0], wo[k, 1], wo[k, 2]), (wi[k, 0], wi[k, 1], wi[k, 2]),
             radiance,
         )
         for c in range(3):
@@ -648,6 +658,6 @@ def pdf_batch(mat_type, mat_param, m, wo, wi):
     out = np.empty(n)
     for k in prange(n):
         out[k] = bsdf_pdf(
-            mat_type, mat_param, m, (wo[k, 0], wo[k, 1], wo[k, 2]), (wi[k, 0], wi[k, 1], wi[k, 2])
+            bsdf_row(mat_type, mat_param, m), (wo[k, 0], wo[k, 1], wo[k, 2]), (wi[k, 0], wi[k, 1], wi[k, 2])
         )
     return out

@@ -4,23 +4,11 @@ A RenderContext is made by tracer.render() for one render and handed to the meth
 (`guide.prepare(scene, ctx)`), to every source (`source.start(ctx, ...)`) and to
 integrators.path.trace_wave. Guides may read it; only the render writes `guide_state`.
 """
-from typing import NamedTuple
-
 import numpy as np
 
 from .bvh import ray_offsets
 from .guiding.contract import empty_state
-
-
-class Surfaces(NamedTuple):
-    """The scene's triangles as the shading kernels read them."""
-
-    tri: np.ndarray  # (F, 3, 3) float64 world vertices
-    normal: np.ndarray  # (F, 3) float64 unit geometric normal, counter-clockwise side
-    material: np.ndarray  # (F,) material index of each triangle
-    eps: np.ndarray  # (F,) float64 ray offset of each triangle (tracer.bvh.ray_offsets)
-    mat_type: np.ndarray  # (M,) int32 material type (tracer.bsdfs)
-    mat_param: np.ndarray  # (M, 8) float64 material parameters
+from .material import Surfaces
 
 
 class RenderContext:
@@ -29,7 +17,8 @@ class RenderContext:
     scene        the Scene (tracer.load_scene)
     accel        the ray-query accel (tracer.bvh.make_accel): intersect(o, d), occluded(o, d, tmax)
     lights       the light tables (tracer.lights.build_lights), a Numba-readable NamedTuple
-    surfaces     Surfaces of the scene (with tri_normal and tri_eps below)
+    surfaces     material.Surfaces of the scene (with tri_normal and tri_eps below; its UVs,
+                 vertex normals and textures), what material.surface_at reads
     tri_normal   (F, 3) float64 unit geometric normals; tri_eps (F,) float64 ray offsets, fitted to
                  the float32 coordinates the ray queries see there
     cam          the camera, packed for camera_ray
@@ -57,8 +46,10 @@ class RenderContext:
         self.rr_depth = int(rr_depth)
         self.nee = bool(nee)
         self.tri_eps = ray_offsets(tri, accel.centre)
+        tex = scene.textures
         self.surfaces = Surfaces(tri, self.tri_normal, scene.tri_material, self.tri_eps, scene.materials.type,
-                                 scene.materials.param)
+                                 scene.materials.param, scene.tri_uv, scene.tri_vn, scene.materials.tex, tex.info,
+                                 tex.data)
         self.n_pixels = int(self.crop[2] * self.crop[3])
         self.guide_state = empty_state()
 

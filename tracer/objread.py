@@ -1,8 +1,8 @@
 """A parallel OBJ reader for the common statements, giving what trimesh gives.
 
-`read_obj(data)` reads OBJ bytes made of `v x y z`, `f` (indices `a`, `a/b`, `a//c` or `a/b/c`,
-any number of vertices), `usemtl`, `mtllib`, `vn`, `vt`, `o`, `g`, `s`, comments and blank
-lines, in Numba kernels over the lines (no Python loop over vertices or faces). It returns the
+`read_obj(data)` reads OBJ bytes made of `v x y z`, `vt u [v [w]]`, `vn x y z`, `f` (indices `a`,
+`a/b`, `a//c` or `a/b/c`, one pattern in the whole file, any number of vertices), `usemtl`,
+`mtllib`, `o`, `g`, `s`, comments and blank lines, in Numba kernels over the lines (no Python loop over vertices or faces). It returns the
 triangles and material groups in the order trimesh's loader produces them (materials in reverse
 order of their first face, faces in file order within each; an all-quad group split as
 [a b c] for every quad, then [c d a] for every quad; mixed groups quad by quad, larger polygons
@@ -19,6 +19,7 @@ fast path, exact when m < 2^53); any other is handed to the C library's strtod (
 rounded in glibc, as Python's float() is).
 """
 import ctypes
+from typing import NamedTuple
 
 import numpy as np
 from llvmlite import ir
@@ -28,7 +29,7 @@ from numba.extending import intrinsic
 from ._jit import jit, kernel
 from .bvh import _bounds, edge_cross
 
-SKIP, VERT, FACE, USEMTL, MTLLIB, OTHER = 0, 1, 2, 3, 4, 5
+SKIP, VERT, FACE, USEMTL, MTLLIB, OTHER, TEXCOORD, NORMAL = 0, 1, 2, 3, 4, 5, 6, 7
 _STRTOD = ctypes.cast(ctypes.CDLL(None).strtod, ctypes.c_void_p).value
 _POW10 = np.array([10.0 ** k for k in range(23)])
 
@@ -66,7 +67,8 @@ def _key(buf, s, e, word):
 
 @kernel
 def classify(buf, starts, ends, kinds):
-    """kinds[l]: the statement of line l (SKIP, VERT, FACE, USEMTL, MTLLIB, or OTHER)."""
+    """kinds[l]: the statement of line l (SKIP, VERT, TEXCOORD, NORMAL, FACE, USEMTL, MTLLIB, or
+    OTHER)."""
     for ln in prange(starts.shape[0]):
         s = starts[ln]
         e = ends[ln]
@@ -88,7 +90,7 @@ def classify(buf, starts, ends, kinds):
                 if c1 == 32:
                     k = VERT
                 elif (c1 == 110 or c1 == 116) and (e - s == 2 or buf[s + 2] == 32):  # vn, vt
-                    k = SKIP
+                    k = NORMAL if c1 == 110 else TEXCOORD
             elif c0 == 102 and c1 == 32:  # 'f '
                 k = FACE
             elif (c0 == 111 or c0 == 103 or c0 == 115) and (e - s == 1 or c1 == 32):  # o, g, s
@@ -168,26 +170,34 @@ def _number(buf, j, e, addr, strtod):
 
 
 @kernel
-def parse_vertices(buf, starts, ends, lines, out, strtod):
-    """out[r] = the three numbers of `v` line lines[r] (strtod: the C function's address, an
-    argument so that the cached kernel holds no address of this process); returns how many lines
-    were not exactly three plain decimals."""
+def parse_vertices(buf, starts, ends, lines, skip, lo, hi, out, strtod):
+    """out[r] = the numbers of line lines[r] after its first `skip` characters (the statement):
+    between lo and hi plain decimals, the first out.shape[1] kept (missing ones 0). strtod: the C
+    function's address, an argument so that the cached kernel holds no address of this process.
+    Returns how many lines were not lo to hi plain decimals."""
     addr = buf.ctypes.data
     bad = 0
     for r in prange(lines.shape[0]):
         ln = lines[r]
         e = ends[ln]
-        j = starts[ln] + 1
+        j = starts[ln] + skip
         ok = True
-        for q in range(3):
+        count = 0
+        for q in range(out.shape[1]):
+            out[r, q] = 0.0
+        for q in range(hi):
             while j < e and _space(buf[j]):
                 j += 1
+            if j >= e:
+                break
             v, j, good = _number(buf, j, e, addr, strtod)
             ok = ok and good
-            out[r, q] = v
+            if q < out.shape[1]:
+                out[r, q] = v
+            count += 1
         while j < e and _space(buf[j]):
             j += 1
-        if not ok or j != e:
+        if not ok or j != e or count < lo:
             bad += 1
     return bad
 
@@ -206,10 +216,11 @@ def _index(buf, i, e):
 
 
 @jit
-def _face_line(buf, s, e, limit, out, o):
-    """Walk the face line [s, e): write its position indices (0-based) to out[o:] if out is long
-    enough; returns (vertex count, pattern, ok). Pattern: 1 a, 2 a/b, 3 a//c, 4 a/b/c, -1 mixed.
-    ok is False on a malformed token or an index outside 1..limit."""
+def _face_line(buf, s, e, limit, limit_t, limit_n, out, o):
+    """Walk the face line [s, e): write its (position, texture, normal) indices (0-based; -1 where
+    the pattern has none) to rows out[o:] if out is long enough; returns (vertex count, pattern,
+    ok). Pattern: 1 a, 2 a/b, 3 a//c, 4 a/b/c, -1 mixed. ok is False on a malformed token or an
+    index outside 1..limit (1..limit_t, 1..limit_n for the others)."""
     j = s + 1
     nvert = 0
     pattern = 0
@@ -220,6 +231,8 @@ def _face_line(buf, s, e, limit, out, o):
         if j >= e:
             break
         a, j = _index(buf, j, e)
+        b = 0
+        c = 0
         pat = 1
         if j < e and buf[j] == 47:  # '/'
             j += 1
@@ -228,10 +241,12 @@ def _face_line(buf, s, e, limit, out, o):
             if j < e and buf[j] == 47:
                 j += 1
                 c, j = _index(buf, j, e)
-                if c < 0:
+                if c < 0 or c > limit_n:
                     ok = False
                 pat = 4 if b >= 0 else 3
             elif b < 0:
+                ok = False
+            if b > limit_t:
                 ok = False
         if j < e and not _space(buf[j]):
             ok = False
@@ -243,20 +258,23 @@ def _face_line(buf, s, e, limit, out, o):
         elif pattern != pat:
             pattern = -1
         if o + nvert < out.shape[0]:
-            out[o + nvert] = a - 1
+            out[o + nvert, 0] = a - 1
+            out[o + nvert, 1] = b - 1 if b > 0 else -1
+            out[o + nvert, 2] = c - 1 if c > 0 else -1
         nvert += 1
     return nvert, pattern, ok
 
 
 @kernel
-def face_counts(buf, starts, ends, lines, vbefore, counts, patterns):
+def face_counts(buf, starts, ends, lines, vbefore, tbefore, nbefore, counts, patterns):
     """counts[r], patterns[r] of face line lines[r]; returns how many lines are malformed or
-    name a vertex not defined before them (vbefore[r] is how many there are)."""
+    name a vertex (texture coordinate, normal) not defined before them (vbefore[r], tbefore[r],
+    nbefore[r] are how many there are)."""
     bad = 0
-    empty = np.empty(0, np.int64)
+    empty = np.empty((0, 3), np.int64)
     for r in prange(lines.shape[0]):
         ln = lines[r]
-        n, pat, ok = _face_line(buf, starts[ln], ends[ln], vbefore[r], empty, 0)
+        n, pat, ok = _face_line(buf, starts[ln], ends[ln], vbefore[r], tbefore[r], nbefore[r], empty, 0)
         counts[r] = n
         patterns[r] = pat
         if not ok or n < 3:
@@ -266,17 +284,18 @@ def face_counts(buf, starts, ends, lines, vbefore, counts, patterns):
 
 @kernel
 def face_indices(buf, starts, ends, lines, offsets, out):
-    """The 0-based position indices of every face line, at out[offsets[r]:offsets[r + 1]]."""
+    """The 0-based (position, texture, normal) indices of every face line, at rows
+    out[offsets[r]:offsets[r + 1]]."""
     for r in prange(lines.shape[0]):
         ln = lines[r]
-        _face_line(buf, starts[ln], ends[ln], 1 << 62, out[: offsets[r + 1]], offsets[r])
+        _face_line(buf, starts[ln], ends[ln], 1 << 62, 1 << 62, 1 << 62, out[: offsets[r + 1]], offsets[r])
 
 
 def _triangles(idx, offsets, counts):
-    """Triangles (T, 3) of the faces idx[offsets[r]:offsets[r] + counts[r]], in trimesh's order;
-    None for a group of polygons of one size above four."""
+    """Triangles (T, 3, K) of the faces idx[offsets[r]:offsets[r] + counts[r]] (rows of K indices),
+    in trimesh's order; None for a group of polygons of one size above four."""
     if counts.size == 0:
-        return np.zeros((0, 3), np.int64)
+        return np.zeros((0, 3, idx.shape[1]), np.int64)
     if counts.min() == counts.max():
         c = int(counts[0])
         rows = idx[offsets[:-1, None] + np.arange(c)] if c <= 4 else None
@@ -296,9 +315,47 @@ def _triangles(idx, offsets, counts):
     return np.stack([idx[base + a], idx[base + b], idx[base + c]], axis=1)
 
 
+class ObjMesh(NamedTuple):
+    """What read_obj returns: tri (F, 3, 3) float64; groups [(usemtl name or None, face count)] in
+    triangle order; mtllibs; usemtl names in order of first use; uv (F, 3, 2) float64 corner
+    texture coordinates, or None where the faces name none; normals (F, 3, 3) float64 corner
+    normals as the file gives them, or None."""
+
+    tri: np.ndarray
+    groups: list
+    mtllibs: list
+    usemtl: list
+    uv: np.ndarray | None = None
+    normals: np.ndarray | None = None
+
+
+def assemble(idx, offsets, counts, face_mat, used):
+    """Triangles (F, 3, K) of the faces (rows idx[offsets[r]:offsets[r + 1]] of K indices each,
+    face r of material face_mat[r], an index into `used`, -1 for none) and their groups, in
+    trimesh's order: the groups in reverse order of their first face, faces in file order within
+    each (one stable sort). None where a group is of polygons of one size above four."""
+    by_mat = np.argsort(face_mat, kind="stable")
+    mats, start = np.unique(face_mat[by_mat], return_index=True)
+    bounds = np.append(start, by_mat.size)
+    tris, groups = [], []
+    for j in np.argsort(by_mat[start])[::-1]:
+        sel = by_mat[bounds[j]: bounds[j + 1]]
+        c = counts[sel]
+        o = np.zeros(sel.size + 1, np.int64)
+        np.cumsum(c, out=o[1:])
+        gidx = idx if sel.size == counts.size else idx[np.repeat(offsets[sel] - o[:-1], c) + np.arange(o[-1])]
+        t = _triangles(gidx, o, c)
+        if t is None:
+            return None
+        tris.append(t)
+        groups.append((used[mats[j]] if mats[j] >= 0 else None, len(t)))
+    if not tris:
+        return None
+    return (np.concatenate(tris) if len(tris) > 1 else tris[0]), groups
+
+
 def read_obj(data):
-    """OBJ bytes -> (tri (F, 3, 3) float64, [(usemtl name or None, face count)], mtllib names,
-    usemtl names in order of first use), or None (see the module docstring)."""
+    """OBJ bytes -> ObjMesh, or None (see the module docstring)."""
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
     if not data.isascii():
@@ -316,21 +373,31 @@ def read_obj(data):
     if (kinds == OTHER).any():
         return None
     vlines = np.flatnonzero(kinds == VERT)
+    tlines = np.flatnonzero(kinds == TEXCOORD)
+    nlines = np.flatnonzero(kinds == NORMAL)
     flines = np.flatnonzero(kinds == FACE)
     verts = np.empty((vlines.size, 3))
-    if parse_vertices(buf, starts, ends, vlines, verts, _STRTOD):
+    if parse_vertices(buf, starts, ends, vlines, 1, 3, 3, verts, _STRTOD):
         return None
-    vbefore = np.searchsorted(vlines, flines)  # vertices defined before each face line
+    texcoords = np.empty((tlines.size, 2))
+    if parse_vertices(buf, starts, ends, tlines, 2, 1, 3, texcoords, _STRTOD):
+        return None
+    normals = np.empty((nlines.size, 3))
+    if parse_vertices(buf, starts, ends, nlines, 2, 3, 3, normals, _STRTOD):
+        return None
+    # what is defined before each face line
+    vbefore, tbefore, nbefore = (np.searchsorted(x, flines) for x in (vlines, tlines, nlines))
     counts = np.empty(flines.size, np.int64)
     patterns = np.empty(flines.size, np.int8)
-    if face_counts(buf, starts, ends, flines, vbefore, counts, patterns):
+    if face_counts(buf, starts, ends, flines, vbefore, tbefore, nbefore, counts, patterns):
         return None
     if patterns.size and (patterns.min() < 1 or patterns.min() != patterns.max()):
         return None
     offsets = np.zeros(flines.size + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])
-    idx = np.empty(offsets[-1], np.int64)
+    idx = np.empty((offsets[-1], 3), np.int64)
     face_indices(buf, starts, ends, flines, offsets, idx)
+    pattern = int(patterns[0]) if patterns.size else 1
 
     # usemtl and mtllib lines are few: read them in Python
     names, mtllibs = [], []
@@ -349,27 +416,13 @@ def read_obj(data):
     uniq = {n: k for k, n in enumerate(used)}
     mat_of_line = np.array([uniq[n] for n in names] + [-1], np.int64)
     face_mat = mat_of_line[np.searchsorted(mlines, flines) - 1]  # -1 picks the trailing -1
-    # the face lines of each material in file order (one stable sort), the groups in reverse
-    # order of their first face, as trimesh builds them
-    by_mat = np.argsort(face_mat, kind="stable")
-    mats, start = np.unique(face_mat[by_mat], return_index=True)
-    bounds = np.append(start, by_mat.size)
-    tris, groups = [], []
-    for j in np.argsort(by_mat[start])[::-1]:
-        sel = by_mat[bounds[j]: bounds[j + 1]]
-        c = counts[sel]
-        o = np.zeros(sel.size + 1, np.int64)
-        np.cumsum(c, out=o[1:])
-        gidx = idx if sel.size == flines.size else idx[np.repeat(offsets[sel] - o[:-1], c) + np.arange(o[-1])]
-        t = _triangles(gidx, o, c)
-        if t is None:
-            return None
-        tris.append(t)
-        groups.append((used[mats[j]] if mats[j] >= 0 else None, len(t)))
-    if not tris:
-        return None  # no faces: the slow path reports it
-    t = np.concatenate(tris) if len(tris) > 1 else tris[0]
-    return verts[t], groups, mtllibs, used
+    got = assemble(idx, offsets, counts, face_mat, used)
+    if got is None:
+        return None  # no faces (the slow path reports it), or polygons trimesh splits otherwise
+    t, groups = got
+    uv = texcoords[t[:, :, 1]] if pattern in (2, 4) else None
+    nrm = normals[t[:, :, 2]] if pattern in (3, 4) else None
+    return ObjMesh(verts[t[:, :, 0]], groups, mtllibs, used, uv, nrm)
 
 
 @kernel

@@ -333,6 +333,7 @@ def _stats(scene, stats, passes, spp, t_setup, t_start, t_render, settings, t_co
         "split_copies": int(stats.split_copies),
         "window_ended": int(stats.window_ended),
         **settings,
+        "texture_memory_bytes": scene.textures.nbytes if len(scene.textures) else 0,
         "guide_memory_bytes": int(guide.peak_memory) if guide is not None else 0,
         "guide_time_learning": float(guide.time_learning) if guide is not None else 0.0,
         # the maps' rebuild between passes, and network inference (0 for guides without a network)

@@ -19,7 +19,9 @@ from . import bsdfs
 from .camera import Camera
 from .errors import SceneError, SettingsError
 from .framing import frame_camera, outside_view, view_axes
+from .material import N_TEX_SLOTS
 from .objread import triangle_areas
+from .textures import Textures, build_textures
 
 log = logging.getLogger("tracer")
 
@@ -32,6 +34,7 @@ class Materials:
     type: np.ndarray  # (M,) int32, bsdfs.DIFFUSE ...
     param: np.ndarray  # (M, 8) float64: kd rgb, ks rgb, alpha, ior
     emission: np.ndarray  # (M, 3) float64 radiance, one-sided
+    tex: np.ndarray = None  # (M, N_TEX_SLOTS) int32 texture of each slot (kd, ks; -1: none), tracer.material
 
     def __repr__(self):
         kinds = [bsdfs.TYPE_NAMES[t] for t in self.type]
@@ -70,6 +73,9 @@ class Scene:
 
     tri          (F, 3, 3) float64  world-space triangle vertices (degenerate ones removed)
     tri_material (F,) int32         material index per triangle
+    tri_uv       (F, 3, 2) float64  corner UVs, or (0, 3, 2) when the scene has none
+    tri_vn       (F, 3, 3) float64  corner normals (zero rows: flat triangles), or (0, 3, 3)
+    textures     the Textures the materials' slots index
     """
 
     path: str
@@ -84,6 +90,9 @@ class Scene:
     bounds: np.ndarray  # (2, 3) float64
     warnings: list = field(default_factory=list)
     framing: str = ""  # how a camera the scene did not give was chosen (tracer.framing); "" if it gave one
+    tri_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 2)))
+    tri_vn: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    textures: Textures = field(default_factory=Textures)
 
     @property
     def n_triangles(self):
@@ -129,7 +138,11 @@ class SceneSpec:
     path          the scene's name in messages and results
     geometry_file the file the triangles came from (named in geometry errors)
     tri           (F, 3, 3) float64 world vertices; tri_material (F,) int32 index into materials
-    materials     [(name, type (tracer.bsdfs), param (8,) float64, emission (3,) float64)]
+    uv, normals   (F, 3, 2) corner UVs and (F, 3, 3) corner normals (a zero row: a flat
+                  triangle), or None
+    materials     [(name, type (tracer.bsdfs), param (8,) float64, emission (3,) float64[, tex])],
+                  tex the index into `textures` of each texture slot (kd, ks; -1 none)
+    textures      [tracer.textures.TextureSpec]
     no_light      what a scene without light lacks, in the reader's terms (the error's text)
     """
 
@@ -145,6 +158,9 @@ class SceneSpec:
     environment: Environment | None = None
     warnings: list = field(default_factory=list)
     no_light: str = "no emitting material and no environment"
+    uv: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    textures: list = field(default_factory=list)
 
 
 def load_scene(path, before_framing=None, **overrides):
@@ -200,7 +216,8 @@ def load_scene(path, before_framing=None, **overrides):
     spec = SceneSpec(path=obj_path if ext == ".obj" else path, geometry_file=obj_path, tri=geo.tri,
                      tri_material=geo.tri_material, materials=geo.materials, width=width, height=height,
                      render=settings, camera=camera, environment=environment, warnings=warnings,
-                     no_light=f"no material with Ke > 0 and no environment in the sidecar{hint}")
+                     no_light=f"no material with Ke > 0 and no environment in the sidecar{hint}",
+                     uv=geo.uv, normals=geo.normals, textures=geo.textures or [])
     return build_scene(spec, before_framing)
 
 
@@ -213,7 +230,10 @@ def build_scene(spec, before_framing=None):
         np.asarray([m[1] for m in spec.materials], dtype=np.int32),
         np.asarray([m[2] for m in spec.materials], dtype=np.float64).reshape(-1, 8),
         np.asarray([m[3] for m in spec.materials], dtype=np.float64).reshape(-1, 3),
+        np.asarray([m[4] if len(m) > 4 else (-1,) * N_TEX_SLOTS for m in spec.materials],
+                   dtype=np.int32).reshape(-1, N_TEX_SLOTS),
     )
+    uv, vn = spec.uv, spec.normals
     tri, tri_material = spec.tri, spec.tri_material
     area2, bounds = triangle_areas(tri)
     keep = area2 > (1e-12 * float(np.linalg.norm(bounds[1] - bounds[0]))) ** 2
@@ -223,6 +243,8 @@ def build_scene(spec, before_framing=None):
 
         warn(spec.warnings, f"{spec.geometry_file}: skipped {int((~keep).sum())} zero-area triangle(s)", logging.INFO)
         tri, tri_material = tri[keep], tri_material[keep]
+        uv = uv[keep] if uv is not None else None
+        vn = vn[keep] if vn is not None else None
         if tri.shape[0] == 0:
             raise SceneError(f"{spec.geometry_file}: every triangle has zero area")
         bounds = triangle_areas(tri)[1]
@@ -246,6 +268,9 @@ def build_scene(spec, before_framing=None):
         environment=spec.environment,
         bounds=bounds,
         warnings=spec.warnings,
+        tri_uv=np.ascontiguousarray(uv, dtype=np.float64) if uv is not None else np.zeros((0, 3, 2)),
+        tri_vn=np.ascontiguousarray(vn, dtype=np.float64) if vn is not None else np.zeros((0, 3, 3)),
+        textures=build_textures(spec.textures, spec.warnings),
     )
     env = spec.environment
     has_env = env is not None and (env.image is not None or env.radiance.max() > 0)

@@ -11,9 +11,10 @@ guide mixture exist once:
     russian_roulette                continue or end, on the throughput BSDF sampling would have had
     next_bounce                     the two together, with their random numbers: a path's next step
 
-Conventions: directions are unit 3-tuples; `wo`, `wi` in the local shading frame (s, t, n) of
-tracer.sampling.frame unless named `*w` (world); densities are per unit solid angle; colours are
-RGB 3-tuples. `a` is the probability of BSDF sampling in the mixture p = a p_bsdf + (1 - a) p_guide
+Conventions: directions are unit 3-tuples; `wo`, `wi` in the local shading frame (s, t, ns) of
+the point's tracer.material.Surface `sf` unless named `*w` (world); `ng` is the true (geometric)
+normal, `cos_o` the world wo's cosine with it (sides, ray offsets and the light-leak test
+material.crosses); densities are per unit solid angle; colours are RGB 3-tuples. `a` is the probability of BSDF sampling in the mixture p = a p_bsdf + (1 - a) p_guide
 (1: no guide at this vertex), `slot` the guide's sampling map there (tracer.guiding.contract.locate).
 """
 import math
@@ -24,6 +25,7 @@ import numpy as np
 from . import bsdfs
 from ._jit import jit
 from .guiding.contract import slot_pdf, slot_sample
+from .material import crosses
 from .lights import env_pdf, env_radiance, sample_light, triangle_emission, triangle_light_pdf
 from .rng import DIR, LOBE, RR, STRATEGY, bounce_dim, draw
 from .sampling import dot, power_heuristic, to_local, to_world
@@ -103,19 +105,19 @@ def emitted_surface(lt, p, dist2, cos_o, depth, prev_pdf, prev_delta):
 
 
 @jit(inline="always")
-def write_aovs(mat_type, mat_param, m, i, depth, cos_o, ng, dist, aov, aov_open):
-    """The AOVs of path i at a vertex of material m (its depth-th bounce, normal ng, arrived at
-    distance dist with cos_o to ng): normal facing the camera and distance at the first hit; albedo
-    at the first vertex that is not a delta BSDF (until then, the delta BSDF's own). Returns
-    whether m is a delta BSDF."""
-    delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
+def write_aovs(sf, i, depth, cos_o, dist, aov, aov_open):
+    """The AOVs of path i at a vertex whose Surface is sf (its depth-th bounce, arrived at distance
+    dist with cos_o to the geometric normal): shading normal facing the camera and distance at the
+    first hit; albedo (textured) at the first vertex that is not a delta BSDF (until then, the delta
+    BSDF's own). Returns whether the BSDF there is a delta BSDF."""
+    delta = bsdfs.bsdf_is_delta(sf.bp)
     if depth == 0:
         sgn = 1.0 if cos_o >= 0.0 else -1.0
         for c in range(3):
-            aov[i, 3 + c] = sgn * ng[c]
+            aov[i, 3 + c] = sgn * sf.ns[c]
         aov[i, 6] = dist
     if aov_open[i]:
-        al = bsdfs.bsdf_albedo(mat_type, mat_param, m)
+        al = bsdfs.bsdf_albedo(sf.bp)
         for c in range(3):
             aov[i, c] = al[c]
         aov_open[i] = delta
@@ -143,21 +145,18 @@ def mixture_pdf(gs, slot, a, pb, wiw):
 
 
 @jit(inline="always")
-def next_event(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0,
-               u_pos1):
-    """Next-event estimation at a non-delta vertex x (normal ng, frame s, t, ng, outgoing wo local),
-    material m, path throughput beta: one light sample (u_light, u_pos0, u_pos1), MIS-weighted by
+def next_event(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1):
+    """Next-event estimation at a non-delta vertex x (Surface sf, geometric normal ng, outgoing wo
+    local), path throughput beta: one light sample (u_light, u_pos0, u_pos1), MIS-weighted by
     the power heuristic against the mixture density of the same direction. Returns (ok, origin,
     unit direction, tmax, contribution beta f le w / p_light): the shadow ray to trace, and what it
     adds if unblocked. ok is False where nothing is to be traced."""
-    ls = light_sample_at(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot, a, eps, tri_eps, u_light,
-                         u_pos0, u_pos1)
+    ls = light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1)
     return ls.ok, ls.origin, ls.direction, ls.tmax, ls.contrib
 
 
 @jit(inline="always")
-def light_sample_at(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, slot, a, eps, tri_eps, u_light,
-                    u_pos0, u_pos1):
+def light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1):
     """next_event with the light sample itself, as a LightSample. The gradient-domain tracer shifts
     this sample to its offset paths."""
     wl, dist, le, pl, lt_tri = sample_light(lt, tri, x, u_light, u_pos0, u_pos1)
@@ -169,9 +168,11 @@ def light_sample_at(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, 
     f = BLACK
     pb = 0.0
     if pl > 0.0 and (le[0] > 0.0 or le[1] > 0.0 or le[2] > 0.0):
-        wil = to_local(wl, s, t, ng)
-        f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wil, True)
-        pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wil), wl)
+        wil = to_local(wl, sf.s, sf.t, sf.ns)
+        f = bsdfs.bsdf_eval(sf.bp, wo, wil, True)
+        if crosses(sf, cos_o, ng, wo, wil, wl):
+            f = BLACK
+        pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(sf.bp, wo, wil), wl)
         if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
             w = power_heuristic(pl, pb)
             so, sd, tmax = shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps)
@@ -183,7 +184,7 @@ def light_sample_at(mat_type, mat_param, m, lt, tri, x, ng, s, t, wo, beta, gs, 
 
 
 @jit(inline="always")
-def sample_mixture(mat_type, mat_param, m, gs, slot, a, wo, s, t, ng, u0, u1, u_lobe, u_strategy):
+def sample_mixture(sf, gs, slot, a, wo, ng, cos_o, u0, u1, u_lobe, u_strategy):
     """Sample the continuation from the mixture (sampleMat): the guide's map `slot` with probability
     1 - a (u_strategy >= a), else the BSDF (u_lobe picks its lobe); u0, u1 the direction.
     Returns (wiw world direction, weight f cos / pdf (RGB), pdf of the mixture, p_bsdf of wiw, delta
@@ -191,9 +192,11 @@ def sample_mixture(mat_type, mat_param, m, gs, slot, a, wo, s, t, ng, u0, u1, u_
     p_bsdf / pdf (1 without a guide, or at a delta lobe))."""
     if a < 1.0 and u_strategy >= a:
         wiw, pg = slot_sample(gs, slot, u0, u1)
-        wi = to_local(wiw, s, t, ng)
-        f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wi, True)
-        pbs = bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wi)
+        wi = to_local(wiw, sf.s, sf.t, sf.ns)
+        f = bsdfs.bsdf_eval(sf.bp, wo, wi, True)
+        if crosses(sf, cos_o, ng, wo, wi, wiw):
+            f = BLACK
+        pbs = bsdfs.bsdf_pdf(sf.bp, wo, wi)
         pdf = a * pbs + (1.0 - a) * pg
         wt = BLACK
         ratio = 1.0
@@ -202,8 +205,10 @@ def sample_mixture(mat_type, mat_param, m, gs, slot, a, wo, s, t, ng, u0, u1, u_
             wt = (f[0] * inv, f[1] * inv, f[2] * inv)
             ratio = pbs * inv
         return wiw, wt, pdf, pbs, False, 1, ratio
-    wi, wt, pdf, dlt = bsdfs.bsdf_sample(mat_type, mat_param, m, wo, u0, u1, u_lobe, True)
-    wiw = to_world(wi, s, t, ng)
+    wi, wt, pdf, dlt = bsdfs.bsdf_sample(sf.bp, wo, u0, u1, u_lobe, True)
+    wiw = to_world(wi, sf.s, sf.t, sf.ns)
+    if crosses(sf, cos_o, ng, wo, wi, wiw):
+        wt = BLACK
     pbs = pdf
     ratio = 1.0
     if a < 1.0 and pdf > 0.0 and not dlt:
@@ -243,9 +248,8 @@ class NextBounce(NamedTuple):
 
 
 @jit(inline="always")
-def next_bounce(mat_type, mat_param, m, gs, slot, a, wo, s, t, ng, beta, gain, depth, rr_depth, max_bounces, ps, key,
-                row):
-    """A path's next step at a vertex of material m (local frame s, t, ng; outgoing wo local) after
+def next_bounce(sf, gs, slot, a, wo, ng, cos_o, beta, gain, depth, rr_depth, max_bounces, ps, key, row):
+    """A path's next step at a vertex with Surface sf (geometric normal ng, cos_o; outgoing wo local) after
     `depth` bounces, with throughput beta and gain so far: the direction from the mixture of the
     guide's map `slot` (probability 1 - a) and the BSDF, its random numbers drawn for path `row`
     of stream `key` (rng.draw: STRATEGY where a < 1, LOBE where the BSDF samples, DIR, DIR + 1),
@@ -253,7 +257,7 @@ def next_bounce(mat_type, mat_param, m, gs, slot, a, wo, s, t, ng, beta, gain, d
     u_strategy = draw(ps, key, row, bounce_dim(depth, STRATEGY)) if a < 1.0 else 1.0
     u_lobe = 0.0 if a < 1.0 and u_strategy >= a else draw(ps, key, row, bounce_dim(depth, LOBE))  # BSDF only
     wiw, wt, pdf, pbs, dlt, strategy, ratio = sample_mixture(
-        mat_type, mat_param, m, gs, slot, a, wo, s, t, ng, draw(ps, key, row, bounce_dim(depth, DIR)),
+        sf, gs, slot, a, wo, ng, cos_o, draw(ps, key, row, bounce_dim(depth, DIR)),
         draw(ps, key, row, bounce_dim(depth, DIR + 1)), u_lobe, u_strategy)
     gn = gain * ratio
     nb = (beta[0] * wt[0], beta[1] * wt[1], beta[2] * wt[2])

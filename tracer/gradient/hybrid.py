@@ -68,13 +68,13 @@ def warm_up(ctx, buf, roughness):
     surf = ctx.surfaces
     start_offsets(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, no_primary_samples(),
                   buf.key[:0], buf.pix[:0], *hb.offsets())
-    shift_offsets(idx, t, prim, b1, b2, buf.ray_d[:0], *surf, ctx.guide_state, roughness, *hb.base(), *hb.offsets())
+    shift_offsets(idx, t, prim, b1, b2, buf.ray_d[:0], surf, ctx.guide_state, roughness, *hb.base(), *hb.offsets())
     _shade(ctx, buf, hb, idx, buf.ray_d[:0], (t, prim, b1, b2), no_primary_samples(), roughness)
     _add_next_event(buf, hb, idx)
 
 
 def _shade(ctx, buf, hb, active, rd, hits, ps, roughness):
-    shade_hybrid(active, rd, *hits, *ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth, ctx.rr_depth,
+    shade_hybrid(active, rd, *hits, ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth, ctx.rr_depth,
                  roughness, *buf.path_state(), *buf.continuation(), *buf.shadow_rays(), *hb.base(), *hb.offsets(),
                  *hb.nee_terms())
 
@@ -103,7 +103,7 @@ def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness):
         stats.rays += na
         t0 = stats.tick("intersect", t0)
         if bounce > 0:
-            shift_offsets(active, t, prim, b1, b2, rd, *surf, ctx.guide_state, roughness, *hb.base(), *hb.offsets())
+            shift_offsets(active, t, prim, b1, b2, rd, surf, ctx.guide_state, roughness, *hb.base(), *hb.offsets())
             t0 = stats.tick("shift", t0)
         # The offsets' own rays, and the visibility of their reconnections
         pi, po = np.nonzero(hb.trace[active])

@@ -11,11 +11,12 @@ from ..integrators.path import MAX_BOUNCES
 from ..lights import ENV_NONE, env_pdf, env_radiance, triangle_emission, triangle_light_pdf
 from ..guiding.contract import locate
 from ..rng import LIGHT, LIGHT_POS, bounce_dim, draw
-from ..sampling import dot, frame, to_local, triangle_point
+from ..material import crosses, surface_at, surface_at_point
+from ..sampling import dot, to_local, triangle_point
 from ..shading import emitted_env, emitted_surface, light_sample_at, next_bounce, offset_point
 from ..shading import shadow_ray, write_aovs, write_shadow
 from .offsets import BLOCKED, CONNECTED, TRACED
-from .shift import is_rough, path_density, reconnection
+from .shift import is_delta, is_rough, path_density, reconnection
 
 # NeeTerms.mode of an offset at a bounce: no NEE term; the base's own weighted value alone (no
 # partner path); the partner shares the base's shadow ray (the offset sits at the base's vertex);
@@ -40,7 +41,7 @@ def _emitted_by(lt, tri_normal, q, wo, dist2, delta):
 
 
 @kernel
-def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, lt, gs,
+def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
                  ps, max_depth, rr_depth, roughness,
                  beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open, prev_rec,
                  alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
@@ -53,7 +54,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
     as the path tracer's, the gradients' with the pair weights), NEE shifted to the offsets, the
     base's direction and roulette. The parameters are bundles splatted by hybrid.py (as
     integrators.path.shade's): entry k is path active[k], its hit t, prim, b1, b2; the scene's
-    Surfaces, lights, guide state, primary samples; the limits max_depth, rr_depth and the shift's
+    material.Surfaces (whole), lights, guide state, primary samples; the limits max_depth, rr_depth and the shift's
     roughness; the base's wave.PathState, Continuation and ShadowRays (its value for L); the
     offsets.BaseBounce this bounce writes (b_*); the Offsets (o_*: their hits of traced rays in
     hit_*, where o_trace; their own shadow rays o_sh, o_sh_*); the NeeTerms (n_*), weighted by
@@ -76,8 +77,8 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         x = (0.0, 0.0, 0.0)
         ng = (0.0, 0.0, 1.0)
         if p >= 0:
-            x = triangle_point(tri, p, b1[k], b2[k])
-            ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])
+            x = triangle_point(surf.tri, p, b1[k], b2[k])
+            ng = (surf.normal[p, 0], surf.normal[p, 1], surf.normal[p, 2])
 
         # Where the offsets are now
         for o in range(4):
@@ -95,11 +96,11 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 o_prim[i, o] = q
                 o_dist2[i, o] = hit_t[i, o] * hit_t[i, o]
                 if q >= 0:
-                    y = triangle_point(tri, q, hit_b1[i, o], hit_b2[i, o])
+                    y = triangle_point(surf.tri, q, hit_b1[i, o], hit_b2[i, o])
                     for c in range(3):
                         o_x[i, o, c] = y[c]
                 # The reverse of a half-vector copy would reconnect here: not a bijection, fail
-                if o_hv[i, o] and (q < 0 or is_rough(mat_type, mat_param, tri_material[q], roughness)):
+                if o_hv[i, o] and (q < 0 or is_rough(surf, surf.material[q], roughness)):
                     o_alive[i, o] = False
 
         # Emission: the base's (the path tracer's, MIS against NEE), and each pair's gradient
@@ -128,7 +129,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                     for c in range(3):
                         G[i, o, c] -= cb[c] * wd
                     continue
-                leo, plo = _emitted_by(lt, tri_normal, o_prim[i, o], (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]),
+                leo, plo = _emitted_by(lt, surf.normal, o_prim[i, o], (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]),
                                        o_dist2[i, o], o_delta[i, o])
                 ro = plo / o_pdf[i, o]
                 R2 = o_R[i, o] * o_R[i, o]
@@ -147,18 +148,19 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         if p < 0:
             continue
 
-        m = tri_material[p]
-        delta = write_aovs(mat_type, mat_param, m, i, dk, -dot(wray, ng), ng, t[k], aov, aov_open)
+        m = surf.material[p]
+        cos_o = -dot(wray, ng)
+        sf = surface_at(surf, p, b1[k], b2[k])
+        delta = write_aovs(sf, i, dk, cos_o, t[k], aov, aov_open)
         if max_depth >= 0 and dk + 1 >= max_depth:
             continue
-        s, tt = frame(ng)
-        wo = to_local((-wray[0], -wray[1], -wray[2]), s, tt, ng)
+        wo = to_local((-wray[0], -wray[1], -wray[2]), sf.s, sf.t, sf.ns)
         kk = key[i]
-        rough = is_rough(mat_type, mat_param, m, roughness)
+        rough = is_rough(surf, m, roughness)
         for o in range(4):
             if o_alive[i, o]:
                 if o_status[i, o] == TRACED:
-                    o_rough[i, o] = is_rough(mat_type, mat_param, tri_material[o_prim[i, o]], roughness)
+                    o_rough[i, o] = is_rough(surf, surf.material[o_prim[i, o]], roughness)
                 else:
                     o_rough[i, o] = rough
 
@@ -166,20 +168,19 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         slot = -1
         a = 1.0
         if not delta and gs.res[0] > 0:
-            cos_o = -dot(wray, ng)
             _, slot, a = locate(gs, x, ng if cos_o >= 0.0 else (-ng[0], -ng[1], -ng[2]), pix[i], dk)
 
         # NEE: the base's sample (the path tracer's), shifted to each offset
         if not delta:
             ls = light_sample_at(
-                mat_type, mat_param, m, lt, tri, x, ng, s, tt, wo, b, gs, slot, a, tri_eps[p], tri_eps,
+                sf, lt, surf.tri, x, ng, cos_o, wo, b, gs, slot, a, surf.eps[p], surf.eps,
                 draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
                 draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)))
             ok, so, sd, tmax, contrib = ls.ok, ls.origin, ls.direction, ls.tmax, ls.contrib
             wl, dist, lel, pll, lt_tri, fb, pbb = ls.wl, ls.dist, ls.le, ls.pl, ls.tri, ls.f, ls.pdf
             valid = pll > 0.0 and (lel[0] > 0.0 or lel[1] > 0.0 or lel[2] > 0.0)
             if valid and not ok:  # no value, but its visibility enters the pairs' weights
-                so, sd, tmax = shadow_ray(x, ng, tri_eps[p], wl, dist, lt, lt_tri, tri_eps)
+                so, sd, tmax = shadow_ray(x, ng, surf.eps[p], wl, dist, lt, lt_tri, surf.eps)
                 ok = tmax > 0.0
                 contrib = (0.0, 0.0, 0.0)
             if ok:
@@ -190,7 +191,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 for c in range(3):
                     n_cn[i, c] = b[c] * fb[c] * lel[c] / pll
                 zl = (x[0] + dist * wl[0], x[1] + dist * wl[1], x[2] + dist * wl[2])
-                rough_z = lt_tri < 0 or is_rough(mat_type, mat_param, tri_material[lt_tri], roughness)
+                rough_z = lt_tri < 0 or is_rough(surf, surf.material[lt_tri], roughness)
                 for o in range(4):
                     if not o_alive[i, o]:
                         n_mode[i, o] = NEE_BASE_ALONE
@@ -200,21 +201,20 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                         # The pair's BSDF sample would be copied, not reconnected: no NEE for it (NEE
                         # reconnects, and both techniques must map a path to the same partner). An
                         # offset at a delta vertex has no partner either way: the base's two techniques.
-                        if bsdfs.bsdf_is_delta(mat_type, mat_param, tri_material[o_prim[i, o]]):
+                        if is_delta(surf, surf.material[o_prim[i, o]]):
                             n_mode[i, o] = NEE_BASE_ALONE
                         continue
                     y = x
                     ngy = ng
-                    sy = s
-                    ty = tt
+                    sfy = sf
                     py = p
                     if st == TRACED:
                         py = o_prim[i, o]
                         y = (o_x[i, o, 0], o_x[i, o, 1], o_x[i, o, 2])
-                        ngy = (tri_normal[py, 0], tri_normal[py, 1], tri_normal[py, 2])
-                        sy, ty = frame(ngy)
-                    my = tri_material[py]
-                    wo_o = to_local((o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]), sy, ty, ngy)
+                        ngy = (surf.normal[py, 0], surf.normal[py, 1], surf.normal[py, 2])
+                        sfy = surface_at_point(surf, py, y)
+                    wo_y = (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2])
+                    wo_o = to_local(wo_y, sfy.s, sfy.t, sfy.ns)
                     wlo = wl
                     disto = dist
                     jl = 1.0
@@ -230,11 +230,11 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                         cos_l = -dot(wlo, nl)
                         leo = triangle_emission(lt, lt_tri, cos_l)
                         plo = triangle_light_pdf(lt, lt_tri, disto * disto, cos_l)
-                    wil = to_local(wlo, sy, ty, ngy)
-                    fo = bsdfs.bsdf_eval(mat_type, mat_param, my, wo_o, wil, True)
-                    n_pbo[i, o] = path_density(gs, mat_type, mat_param, my, y, ngy,
-                                               (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]), wlo,
-                                               bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wil))
+                    wil = to_local(wlo, sfy.s, sfy.t, sfy.ns)
+                    fo = bsdfs.bsdf_eval(sfy.bp, wo_o, wil, True)
+                    if crosses(sfy, dot(wo_y, ngy), ngy, wo_o, wil, wlo):
+                        fo = (0.0, 0.0, 0.0)
+                    n_pbo[i, o] = path_density(gs, sfy.bp, y, ngy, wo_y, wlo, bsdfs.bsdf_pdf(sfy.bp, wo_o, wil))
                     n_plo[i, o] = plo
                     n_rj[i, o] = o_R[i, o] * jl
                     for c in range(3):
@@ -243,7 +243,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                         n_mode[i, o] = NEE_BASE_RAY
                         continue
                     n_mode[i, o] = NEE_OWN_RAY
-                    oo, od, otmax = shadow_ray(y, ngy, tri_eps[py], wlo, disto, lt, lt_tri, tri_eps)
+                    oo, od, otmax = shadow_ray(y, ngy, surf.eps[py], wlo, disto, lt, lt_tri, surf.eps)
                     if otmax > 0.0:
                         o_sh[i, o] = True
                         o_sh_tmax[i, o] = otmax
@@ -252,12 +252,11 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                             o_sh_d[i, o, c] = od[c]
 
         # The base's next direction and roulette (the path tracer's, from the guide's mixture)
-        nx = next_bounce(mat_type, mat_param, m, gs, slot, a, wo, s, tt, ng, b, gain[i], dk, rr_depth, MAX_BOUNCES,
-                         ps, kk, i)
+        nx = next_bounce(sf, gs, slot, a, wo, ng, cos_o, b, gain[i], dk, rr_depth, MAX_BOUNCES, ps, kk, i)
         if not nx.ok:
             continue
         wiw, wt, pdf, dlt, nb, gn, q = nx.wi, nx.weight, nx.pdf, nx.delta, nx.beta, nx.gain, nx.q
-        no = offset_point(x, ng, wiw, tri_eps[p])
+        no = offset_point(x, ng, wiw, surf.eps[p])
         for c in range(3):
             beta[i, c] = nb[c]
             next_o[k, c] = no[c]

@@ -12,7 +12,8 @@ from .. import bsdfs
 from .._jit import jit, kernel
 from ..camera import camera_ray
 from ..rng import DIM_PIXEL, draw
-from ..sampling import dot, frame, to_local, to_world, triangle_point
+from ..material import crosses, surface_at_point
+from ..sampling import dot, to_local, to_world, triangle_point
 from ..shading import offset_point
 from .shift import half_vector_shift, is_rough, path_density, reconnection
 
@@ -183,14 +184,13 @@ def _finite(o_beta, o_R, i, o):
 
 
 @kernel
-def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param,
-                  gs, roughness, b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
+def shift_offsets(active, t, prim, b1, b2, ray_d, surf, gs, roughness, b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
                   o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights, o_trace,
                   o_reconn, o_ray_o, o_ray_d, o_tmax, G, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o, o_sh_d,
                   o_sh_tmax):
     """Shift each offset (the Offsets o_*) across the base's last bounce x_i -> x_{i+1} (the
-    BaseBounce b_*; entry k: path active[k], its ray ray_d[k] and hit t, prim, b1, b2; the
-    scene's Surfaces; gs: the guide's state, whose mixture gives an offset the density its own
+    BaseBounce b_*; entry k: path active[k], its ray ray_d[k] and hit t, prim, b1, b2; surf the
+    scene's material.Surfaces; gs: the guide's state, whose mixture gives an offset the density its own
     pixel's path tracer would, shift.path_density): reconnection (a visibility ray to test, o_reconn) or half-vector
     copy (a ray to trace, o_trace); updates beta_o, R, and the offset's last density. o_lights: whether
     the pair's weights for this bounce count the light techniques (not after a half-vector copy, whose
@@ -201,15 +201,15 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material,
         rough1 = True  # the environment counts as rough
         x1 = (0.0, 0.0, 0.0)
         if p1 >= 0:
-            rough1 = is_rough(mat_type, mat_param, tri_material[p1], roughness)
-            x1 = triangle_point(tri, p1, b1[k], b2[k])
+            rough1 = is_rough(surf, surf.material[p1], roughness)
+            x1 = triangle_point(surf.tri, p1, b1[k], b2[k])
         wib_w = (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2])
         px = b_prim[i]
-        mx = tri_material[px]
-        ngx = (tri_normal[px, 0], tri_normal[px, 1], tri_normal[px, 2])
-        sx, tx = frame(ngx)
-        wi_b = to_local(wib_w, sx, tx, ngx)
-        wo_b = to_local((b_wo[i, 0], b_wo[i, 1], b_wo[i, 2]), sx, tx, ngx)
+        xb = (b_x[i, 0], b_x[i, 1], b_x[i, 2])
+        sfx = surface_at_point(surf, px, xb)
+        ngx = (surf.normal[px, 0], surf.normal[px, 1], surf.normal[px, 2])
+        wi_b = to_local(wib_w, sfx.s, sfx.t, sfx.ns)
+        wo_b = to_local((b_wo[i, 0], b_wo[i, 1], b_wo[i, 2]), sfx.s, sfx.t, sfx.ns)
         pb = b_pdf[i]
         for o in range(4):
             o_trace[i, o] = False
@@ -226,10 +226,11 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material,
                 continue
             if st == RECENT:  # at x_i with its own incoming direction
                 wo_w = (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2])
-                wo_o = to_local(wo_w, sx, tx, ngx)
-                f = bsdfs.bsdf_eval(mat_type, mat_param, mx, wo_o, wi_b, True)
-                po = path_density(gs, mat_type, mat_param, mx, (b_x[i, 0], b_x[i, 1], b_x[i, 2]), ngx, wo_w, wib_w,
-                                  bsdfs.bsdf_pdf(mat_type, mat_param, mx, wo_o, wi_b))
+                wo_o = to_local(wo_w, sfx.s, sfx.t, sfx.ns)
+                f = bsdfs.bsdf_eval(sfx.bp, wo_o, wi_b, True)
+                if crosses(sfx, dot(wo_w, ngx), ngx, wo_o, wi_b, wib_w):
+                    f = (0.0, 0.0, 0.0)
+                po = path_density(gs, sfx.bp, xb, ngx, wo_w, wib_w, bsdfs.bsdf_pdf(sfx.bp, wo_o, wi_b))
                 if not po > 0.0:
                     o_alive[i, o] = False
                     continue
@@ -241,11 +242,11 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material,
                 o_status[i, o] = CONNECTED
                 continue
             py = o_prim[i, o]
-            my = tri_material[py]
             y = (o_x[i, o, 0], o_x[i, o, 1], o_x[i, o, 2])
-            ngy = (tri_normal[py, 0], tri_normal[py, 1], tri_normal[py, 2])
-            sy, ty = frame(ngy)
-            wo_o = to_local((o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]), sy, ty, ngy)
+            sfy = surface_at_point(surf, py, y)
+            ngy = (surf.normal[py, 0], surf.normal[py, 1], surf.normal[py, 2])
+            wo_y = (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2])
+            wo_o = to_local(wo_y, sfy.s, sfy.t, sfy.ns)
             if b_rough[i] and o_rough[i, o] and rough1:
                 # Reconnect y_i to x_{i+1} (or to the environment along the base's direction)
                 jac = 1.0
@@ -253,24 +254,25 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material,
                 d2 = 0.0
                 n1 = (0.0, 0.0, 1.0)
                 if p1 >= 0:
-                    n1 = (tri_normal[p1, 0], tri_normal[p1, 1], tri_normal[p1, 2])
+                    n1 = (surf.normal[p1, 0], surf.normal[p1, 1], surf.normal[p1, 2])
                     wn, dist, jac = reconnection((b_x[i, 0], b_x[i, 1], b_x[i, 2]), y, x1, n1)
                     if not jac > 0.0:
                         o_alive[i, o] = False
                         continue
                     d2 = dist * dist
-                wi_o = to_local(wn, sy, ty, ngy)
-                f = bsdfs.bsdf_eval(mat_type, mat_param, my, wo_o, wi_o, True)
-                po = path_density(gs, mat_type, mat_param, my, y, ngy, (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]),
-                                  wn, bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wi_o))
+                wi_o = to_local(wn, sfy.s, sfy.t, sfy.ns)
+                f = bsdfs.bsdf_eval(sfy.bp, wo_o, wi_o, True)
+                if crosses(sfy, dot(wo_y, ngy), ngy, wo_o, wi_o, wn):
+                    f = (0.0, 0.0, 0.0)
+                po = path_density(gs, sfy.bp, y, ngy, wo_y, wn, bsdfs.bsdf_pdf(sfy.bp, wo_o, wi_o))
                 if not (po > 0.0 and math.isfinite(jac)):
                     o_alive[i, o] = False
                     continue
-                org = offset_point(y, ngy, wn, tri_eps[py])
+                org = offset_point(y, ngy, wn, surf.eps[py])
                 tmax = np.inf
                 dr = wn
                 if p1 >= 0:  # stop short of x_{i+1}: its end offset toward y_i
-                    s1 = -tri_eps[p1] if dot(wn, n1) > 0.0 else tri_eps[p1]
+                    s1 = -surf.eps[p1] if dot(wn, n1) > 0.0 else surf.eps[p1]
                     e = (x1[0] + s1 * n1[0], x1[1] + s1 * n1[1], x1[2] + s1 * n1[2])
                     v = (e[0] - org[0], e[1] - org[1], e[2] - org[2])
                     tmax = math.sqrt(dot(v, v))
@@ -298,16 +300,17 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, tri, tri_normal, tri_material,
                 continue
             # Half-vector copy (between vertices of the same class; a delta vertex and one that is not
             # have no partner either way, and keep the base's two techniques)
-            o_lights[i, o] = b_delta[i] != bsdfs.bsdf_is_delta(mat_type, mat_param, my)
-            ok, wi_o, f, po, jac = half_vector_shift(mat_type, mat_param, mx, my, wo_b, wi_b, wo_o, b_delta[i])
+            o_lights[i, o] = b_delta[i] != bsdfs.bsdf_is_delta(sfy.bp)
+            ok, wi_o, f, po, jac = half_vector_shift(sfx.bp, sfy.bp, wo_b, wi_b, wo_o, b_delta[i])
             if not ok:
                 o_alive[i, o] = False
                 continue
-            wiw = to_world(wi_o, sy, ty, ngy)
+            wiw = to_world(wi_o, sfy.s, sfy.t, sfy.ns)
+            if crosses(sfy, dot(wo_y, ngy), ngy, wo_o, wi_o, wiw):
+                f = (0.0, 0.0, 0.0)
             if not b_delta[i]:
-                po = path_density(gs, mat_type, mat_param, my, y, ngy, (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]),
-                                  wiw, po)
-            org = offset_point(y, ngy, wiw, tri_eps[py])
+                po = path_density(gs, sfy.bp, y, ngy, wo_y, wiw, po)
+            org = offset_point(y, ngy, wiw, surf.eps[py])
             for c in range(3):
                 o_beta[i, o, c] *= f[c] * jac / pb
                 o_ray_o[i, o, c] = org[c]

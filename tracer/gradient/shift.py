@@ -13,8 +13,16 @@ from ..shading import mixture_pdf
 
 
 @jit(inline="always")
-def is_rough(mat_type, mat_param, m, roughness):
-    return bsdfs.bsdf_roughness(mat_type, mat_param, m) > roughness
+def is_rough(surf, m, roughness):
+    """Material m (of the material.Surfaces surf) is rough enough to reconnect (roughness is not
+    textured: the table's row decides)."""
+    return bsdfs.bsdf_roughness(bsdfs.bsdf_row(surf.mat_type, surf.mat_param, m)) > roughness
+
+
+@jit(inline="always")
+def is_delta(surf, m):
+    """Material m (of surf) scatters into discrete directions only."""
+    return bsdfs.bsdf_is_delta(bsdfs.bsdf_row(surf.mat_type, surf.mat_param, m))
 
 
 @jit(inline="always")
@@ -39,13 +47,13 @@ def reconnection(x, y, z, nz):
 
 
 @jit(inline="always")
-def path_density(gs, mat_type, mat_param, m, x, ng, wo_w, wi_w, pb):
-    """The density the path tracer samples world direction wi_w with at vertex x (material m,
+def path_density(gs, bp, x, ng, wo_w, wi_w, pb):
+    """The density the path tracer samples world direction wi_w with at vertex x (BSDF bp there,
     geometric normal ng) reached from world direction wo_w (pointing back along the path), given
     the BSDF's own density pb: pb, or with a guide's map there the mixture a pb + (1 - a) p_guide
     (integrators.path.shade's, for guides without per-pixel maps). What makes an offset's density
     the one its own pixel's path tracer would give it."""
-    if gs.res[0] == 0 or bsdfs.bsdf_is_delta(mat_type, mat_param, m):
+    if gs.res[0] == 0 or bsdfs.bsdf_is_delta(bp):
         return pb
     nf = ng if dot(wo_w, ng) >= 0.0 else (-ng[0], -ng[1], -ng[2])
     _, slot, a = locate(gs, x, nf, -1, 1)
@@ -53,27 +61,27 @@ def path_density(gs, mat_type, mat_param, m, x, ng, wo_w, wi_w, pb):
 
 
 @jit(inline="always")
-def half_vector_shift(mat_type, mat_param, mx, my, wo_b, wi_b, wo_o, delta):
-    """The direction of the offset at y (material my, incoming wo_o, local) that copies the base's
-    bounce at x (material mx, wo_b -> wi_b, local; delta: from a delta lobe). Returns (ok, wi_o,
+def half_vector_shift(bpx, bpy, wo_b, wi_b, wo_o, delta):
+    """The direction of the offset at y (BSDF bpy, incoming wo_o, local) that copies the base's
+    bounce at x (BSDF bpx, wo_b -> wi_b, local; delta: from a delta lobe). Returns (ok, wi_o,
     f |cos| (discrete value for a delta lobe), density, Jacobian d wi_o / d wi_b). It fails (ok False)
     where the offset would change lobe: reflect where the base refracted or the reverse, a delta lobe
     where the base's was not or the reverse, total internal reflection."""
     zero = (0.0, 0.0, 0.0)
     transmit = wo_b[2] * wi_b[2] < 0.0
     if delta:
-        wi, val, prob = bsdfs.delta_lobe(mat_type, mat_param, my, wo_o, transmit, True)
+        wi, val, prob = bsdfs.delta_lobe(bpy, wo_o, transmit, True)
         return prob > 0.0, wi, val, prob, 1.0
-    if bsdfs.bsdf_is_delta(mat_type, mat_param, my):
+    if bsdfs.bsdf_is_delta(bpy):
         return False, zero, zero, 0.0, 0.0
     if not transmit:
         hb = (wo_b[0] + wi_b[0], wo_b[1] + wi_b[1], wo_b[2] + wi_b[2])
         et_b = 1.0
         et_o = 1.0
     else:
-        if mat_type[mx] != bsdfs.ROUGH_DIELECTRIC or mat_type[my] != bsdfs.ROUGH_DIELECTRIC:
+        if bpx[0] != bsdfs.ROUGH_DIELECTRIC or bpy[0] != bsdfs.ROUGH_DIELECTRIC:
             return False, zero, zero, 0.0, 0.0
-        ior = mat_param[mx, 7]
+        ior = bpx[1][7]
         ei_b, et_b = (1.0, ior) if wo_b[2] > 0.0 else (ior, 1.0)
         hb = (-(ei_b * wo_b[0] + et_b * wi_b[0]), -(ei_b * wo_b[1] + et_b * wi_b[1]),
               -(ei_b * wo_b[2] + et_b * wi_b[2]))
@@ -87,7 +95,7 @@ def half_vector_shift(mat_type, mat_param, mx, my, wo_b, wi_b, wo_o, delta):
         wi = (2.0 * c * h[0] - wo_o[0], 2.0 * c * h[1] - wo_o[1], 2.0 * c * h[2] - wo_o[2])
         ho = (wo_o[0] + wi[0], wo_o[1] + wi[1], wo_o[2] + wi[2])
     else:
-        ior = mat_param[my, 7]
+        ior = bpy[1][7]
         ei_o, et_o = (1.0, ior) if wo_o[2] > 0.0 else (ior, 1.0)
         hh = h if c >= 0.0 else (-h[0], -h[1], -h[2])
         c = abs(c)
@@ -103,6 +111,6 @@ def half_vector_shift(mat_type, mat_param, mx, my, wo_b, wi_b, wo_o, delta):
     if not den > 0.0 or (wo_o[2] * wi[2] < 0.0) != transmit:  # the offset's lobe must be the base's
         return False, zero, zero, 0.0, 0.0
     jac = et_b * et_b * abs(dot(wi_b, h)) * dot(ho, ho) / den
-    f = bsdfs.bsdf_eval(mat_type, mat_param, my, wo_o, wi, True)
-    pdf = bsdfs.bsdf_pdf(mat_type, mat_param, my, wo_o, wi)
+    f = bsdfs.bsdf_eval(bpy, wo_o, wi, True)
+    pdf = bsdfs.bsdf_pdf(bpy, wo_o, wi)
     return pdf > 0.0 and math.isfinite(jac), wi, f, pdf, jac

@@ -36,7 +36,8 @@ from ..guiding.records import finalize_records
 from ..guiding.contract import locate
 from ..lights import ENV_NONE
 from ..rng import LIGHT, LIGHT_POS, bounce_dim, draw
-from ..sampling import dot, frame, to_local, triangle_point
+from ..material import surface_at
+from ..sampling import dot, to_local, triangle_point
 from ..shading import (emitted_env, emitted_surface, next_bounce, next_event, offset_point, write_aovs, write_shadow)
 from ..splitting import merge_copies, split_wave
 from ..result import RenderResult, report_dark
@@ -52,7 +53,7 @@ RECORD_INDIRECT = 2  # records of the radiance less the emission the direction h
 
 
 @kernel
-def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, tri_eps, mat_type, mat_param, lt, gs,
+def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs,
           ps, max_depth, rr_depth, nee,
           beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open, prev_rec,
           alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow, record, rec_base,
@@ -63,7 +64,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
     kernel takes the arrays one by one: Numba 0.68 loses writes inside a parallel loop into arrays
     that arrive in a tuple, docs/findings.md; tests/test_seams.py checks every name against its
     bundle): the hits (t, prim, b1, b2) of entry k, whose ray is ray_o/ray_d[k] and whose path
-    slot is active[k]; the scene's context.Surfaces; lt the lights; gs the guide's GuideState
+    slot is active[k]; surf the scene's material.Surfaces (whole: it is only read); lt the lights; gs the guide's GuideState
     (empty: BSDF sampling); ps the wave's PrimarySamples; the limits max_depth, rr_depth and nee
     (False: no light sampling; emission found by a path then counts in full, without MIS); the
     wave.PathState of every slot (L_cam[i] gets the light the camera ray sees directly: the
@@ -110,9 +111,8 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
             continue
 
         # Hit point (from barycentrics: on the triangle's plane) and geometric normal
-        x = triangle_point(tri, p, b1[k], b2[k])
-        ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])  # unit, counter-clockwise side
-        m = tri_material[p]
+        x = triangle_point(surf.tri, p, b1[k], b2[k])
+        ng = (surf.normal[p, 0], surf.normal[p, 1], surf.normal[p, 2])  # unit, counter-clockwise side
         cos_o = -dot(wray, ng)  # > 0 when the path arrived on the counter-clockwise side
 
         # Emission, MIS-weighted against NEE's choice of this triangle
@@ -128,13 +128,13 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
                 for c in range(3):
                     r_L0[prev_rec[i], c] += b[c] * le[c] * x_le
 
-        delta = write_aovs(mat_type, mat_param, m, i, dk, cos_o, ng, t[k], aov, aov_open)
+        sf = surface_at(surf, p, b1[k], b2[k])  # the BSDF there, textures evaluated, and its frame
+        delta = write_aovs(sf, i, dk, cos_o, t[k], aov, aov_open)
 
         # Continue past this vertex?
         if max_depth >= 0 and dk + 1 >= max_depth:
             continue
-        s, tt = frame(ng)
-        wo = to_local((-wray[0], -wray[1], -wray[2]), s, tt, ng)
+        wo = to_local((-wray[0], -wray[1], -wray[2]), sf.s, sf.t, sf.ns)
         kk = key[i]  # the path's random stream
 
         # Where the guide's map is (node, slot) and the mixing weight a (probability of BSDF sampling)
@@ -148,16 +148,15 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         # Next-event estimation (not at delta BSDFs)
         if nee and not delta:
             ok, so, sd, tmax, contrib = next_event(
-                mat_type, mat_param, m, lt, tri, x, ng, s, tt, wo, b, gs, slot, a, tri_eps[p],
-                tri_eps, draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
+                sf, lt, surf.tri, x, ng, cos_o, wo, b, gs, slot, a, surf.eps[p],
+                surf.eps, draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
                 draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)))
             if ok:
                 write_shadow(k, so, sd, tmax, contrib, sh_o, sh_d, sh_tmax, sh_L, has_shadow)
 
         # The continuation from the mixture (the guide with probability 1 - a, else the BSDF), then
         # possibly the end of the path by Russian roulette
-        nx = next_bounce(mat_type, mat_param, m, gs, slot, a, wo, s, tt, ng, b, gain[i], dk, rr_depth, MAX_BOUNCES,
-                         ps, kk, i)
+        nx = next_bounce(sf, gs, slot, a, wo, ng, cos_o, b, gain[i], dk, rr_depth, MAX_BOUNCES, ps, kk, i)
         ok, wiw, wt, pdf, pbs, dlt, strategy = nx.ok, nx.wi, nx.weight, nx.pdf, nx.pdf_bsdf, nx.delta, nx.strategy
         nb, gn = nx.beta, nx.gain
 
@@ -186,7 +185,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, tri, tri_normal, tri_material, 
         if not ok:
             continue
 
-        no = offset_point(x, ng, wiw, tri_eps[p])
+        no = offset_point(x, ng, wiw, surf.eps[p])
         for c in range(3):
             beta[i, c] = nb[c]
             next_o[k, c] = no[c]
@@ -237,7 +236,7 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
             t0 = stats.tick("split", t0)
         if record > 0 and n_rec + n_active > rec.strategy.shape[0]:
             rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
-        shade(active[:n_active], ro, rd, *hits, *ctx.surfaces, ctx.lights, ctx.guide_state, ps, *limits, *state,
+        shade(active[:n_active], ro, rd, *hits, ctx.surfaces, ctx.lights, ctx.guide_state, ps, *limits, *state,
               *out, *shadow, record, n_rec, *rec)
         t0 = stats.tick("shade", t0)
         n_next, ns = compact(active[:n_active], *out, *shadow, active2, buf.ray_o, buf.ray_d, *queue)

@@ -17,21 +17,36 @@ import numpy as np
 
 from .. import bsdfs
 from ..errors import SceneError
-from ..objread import read_obj
+from ..material import N_TEX_SLOTS, TEX_SLOT_KD, TEX_SLOT_KS
+from ..textures import TextureSpec
+from ..objread import ObjMesh, assemble, read_obj
 from .text import check_text, read_bytes, read_text, warn
 
 _MTL_USED = {"newmtl", "Kd", "Ks", "Ke", "Ns", "Ni", "illum", "Pr", "Pm"}
+_MTL_MAPS = {"map_Kd": TEX_SLOT_KD, "map_Ks": TEX_SLOT_KS}  # the texture maps the tracer reads
+# options of a map statement and how many numbers each takes at most
+_MAP_OPTIONS = {"-blendu": 1, "-blendv": 1, "-bm": 1, "-boost": 1, "-cc": 1, "-clamp": 1, "-imfchan": 1, "-mm": 2,
+                "-o": 3, "-s": 3, "-t": 3, "-texres": 1, "-type": 1}
 DEFAULT_MATERIAL = (bsdfs.DIFFUSE, (0.8, 0.8, 0.8, 0, 0, 0, 0, 1.5), (0.0, 0.0, 0.0))  # (type, param, emission)
 
 
 @dataclass
 class ObjScan:
     """What scan_obj learned: the decoded text, the `mtllib` file names and the `usemtl` names
-    (in order of first use)."""
+    (in order of first use); and, for the faces' texture coordinates and normals, every face
+    corner's 0-based (position, texture, normal) indices (-1: none) as rows of `corners`, each
+    face's corner count and material (index into usemtl, -1: none), the `vt` (u, v) and `vn`
+    values."""
 
     text: str
     mtllibs: list
     usemtl: list
+    corners: list = None
+    counts: list = None
+    face_mat: list = None
+    texcoords: list = None
+    normals: list = None
+    positions: list = None
 
 
 def scan_obj(path):
@@ -42,6 +57,8 @@ def scan_obj(path):
     """
     text = read_text(path, "OBJ")
     mtllibs, usemtl = [], {}
+    corners, counts, face_mat, vts, vns, positions = [], [], [], [], [], []
+    cur = -1
     nv = 0
     for lineno, line in enumerate(text.splitlines(), 1):
         parts = line.split()
@@ -57,31 +74,85 @@ def scan_obj(path):
                 raise SceneError(f"{path}:{lineno}: malformed vertex line {line.strip()!r}")
             if not all(math.isfinite(x) for x in xyz):
                 raise SceneError(f"{path}:{lineno}: vertex is not finite: {line.strip()!r}")
+            positions.append(xyz)
             nv += 1
         elif key == "f":
             if len(parts) < 4:
                 raise SceneError(f"{path}:{lineno}: a face needs at least 3 vertices: {line.strip()!r}")
             for item in parts[1:]:
+                fields = item.split("/")
                 try:
-                    idx = int(item.split("/")[0])
+                    idx = int(fields[0])
+                    rest = [int(x) if x else 0 for x in fields[1:3]] + [0, 0]
                 except ValueError:
                     raise SceneError(f"{path}:{lineno}: malformed face line {line.strip()!r}") from None
                 if idx == 0 or idx > nv or -idx > nv:
                     raise SceneError(
                         f"{path}:{lineno}: face refers to vertex {idx}, but {nv} vertices are defined"
                     )
+                row = [idx - 1 if idx > 0 else nv + idx]
+                for k, (j, n) in enumerate(zip(rest[:2], (len(vts), len(vns)))):
+                    if j > n or -j > n:
+                        what = ("texture coordinate", "normal")[k]
+                        raise SceneError(f"{path}:{lineno}: face refers to {what} {j}, but {n} are defined")
+                    row.append(j - 1 if j > 0 else (n + j if j < 0 else -1))
+                corners.append(row)
+            counts.append(len(parts) - 1)
+            face_mat.append(cur)
+        elif key in ("vt", "vn"):
+            try:
+                vals = [float(x) for x in parts[1:4]]
+            except ValueError:
+                vals = []
+            if len(vals) < (1 if key == "vt" else 3) or not all(math.isfinite(x) for x in vals):
+                raise SceneError(f"{path}:{lineno}: malformed {key} line {line.strip()!r}")
+            if key == "vt":
+                vts.append((vals + [0.0])[:2])
+            else:
+                vns.append(vals)
         elif key == "mtllib":
             mtllibs.extend(parts[1:])
         elif key == "usemtl" and len(parts) > 1:
-            usemtl.setdefault(" ".join(parts[1:]), None)
-    return ObjScan(text, mtllibs, list(usemtl))
+            name = " ".join(parts[1:])
+            usemtl.setdefault(name, None)
+            cur = list(usemtl).index(name)
+    return ObjScan(text, mtllibs, list(usemtl), corners, counts, face_mat, vts, vns, positions)
+
+
+def parse_map(path, lineno, args):
+    """(file path, uv affine (a, b, c, d, e, f)) of a map statement's arguments: its options
+    (`-s` scale and `-o` offset honoured: u' = s_u u + o_u, v' = s_v v + o_v; the others skipped)
+    and the file name, relative to the MTL's folder."""
+    scale, offset = [1.0, 1.0], [0.0, 0.0]
+    k = 0
+    while k < len(args) and args[k] in _MAP_OPTIONS:
+        opt = args[k]
+        k += 1
+        vals = []
+        while k < len(args) and len(vals) < _MAP_OPTIONS[opt]:
+            try:
+                vals.append(float(args[k]))
+            except ValueError:
+                if opt not in ("-o", "-s", "-t") or not vals:
+                    vals.append(args[k])  # a word argument (-clamp on, -imfchan l, -type sphere)
+                    k += 1
+                break
+            k += 1
+        if opt == "-s" and vals:
+            scale = [float(vals[0]), float(vals[1]) if len(vals) > 1 else 1.0]
+        elif opt == "-o" and vals:
+            offset = [float(vals[0]), float(vals[1]) if len(vals) > 1 else 0.0]
+    name = " ".join(args[k:])
+    if not name:
+        raise SceneError(f"{path}:{lineno}: map statement without a file name")
+    return os.path.join(os.path.dirname(path), name), (scale[0], 0.0, offset[0], 0.0, scale[1], offset[1])
 
 
 def parse_mtl(path, warnings):
-    """Read an MTL file into {name: {statement: [floats]}}; report what is ignored."""
+    """Read an MTL file into {name: {statement: [floats], map_Kd / map_Ks: (file, uv, "mtl:line")}};
+    report what is ignored."""
     mats = {}
     ignored = {}
-    missing = {}  # texture file name -> first line that names it
     cur = None
     for lineno, line in enumerate(read_text(path, "MTL").splitlines(), 1):
         parts = line.split()
@@ -96,11 +167,13 @@ def parse_mtl(path, warnings):
             continue
         if cur is None:
             raise SceneError(f"{path}:{lineno}: {key!r} before any newmtl")
+        if key in _MTL_MAPS:
+            file, uv = parse_map(path, lineno, args)
+            mats[cur][key] = (file, uv, f"{path}:{lineno}")
+            continue
         if key.startswith("map_") or key in ("bump", "disp", "decal", "refl", "norm"):
-            # textures are replaced by the constant whether or not their file exists
-            if not args or not os.path.isfile(os.path.join(os.path.dirname(path), args[-1])):
-                missing.setdefault(args[-1] if args else "", lineno)
-            ignored.setdefault(key + " (textures are not supported; the constant is used)", set()).add(cur)
+            what = "bump maps" if key in ("bump", "map_bump", "norm") else "this map"
+            ignored.setdefault(f"{key} ({what} not supported yet; ignored)", set()).add(cur)
             continue
         if key not in _MTL_USED:
             ignored.setdefault(key, set()).add(cur)
@@ -119,15 +192,20 @@ def parse_mtl(path, warnings):
         mats[cur][key] = vals
     for key, names in sorted(ignored.items()):
         warn(warnings, f"{path}: ignoring unsupported statement {key} in {len(names)} material(s)")
-    if missing:
-        files = ", ".join(f"{name!r} (line {line})" for name, line in list(missing.items())[:3])
-        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
-        warn(warnings, f"{path}: texture file(s) not found: {files}{more}; the constant is used anyway")
     return mats
 
 
-def material_from_mtl(name, st, where, warnings):
-    """(type, param (8,), emission (3,)) for one MTL material's statements."""
+def material_from_mtl(name, st, where, warnings, textures=None):
+    """(type, param (8,), emission (3,), tex (N_TEX_SLOTS,)) for one MTL material's statements;
+    its maps are appended to `textures` (TextureSpecs) and tex holds their indices (-1: none).
+
+    The PBR extension (`Pm`, `Pr`, as Blender and other exporters write it) is read the way glTF's
+    metallic-roughness model means it and takes precedence over `illum` (except a dielectric's
+    `illum 4/6/7`): `Pm` >= 0.5 is a conductor whose F0 is the base colour `Kd` (or `Ks` where `Kd`
+    is black or absent, the convention of the built-in scenes), alpha = Pr^2; otherwise `Pr` makes
+    a glossy plastic over `Kd` with specular F0 from `Ni` ((n - 1)^2 / (n + 1)^2, 0.04 without
+    `Ni`), alpha = Pr^2."""
+    kd_given = "Kd" in st
     kd = np.array(st.get("Kd", [0.0, 0.0, 0.0] if "Ke" in st else [0.8, 0.8, 0.8]))
     ks_given = "Ks" in st
     ks = np.array(st.get("Ks", [0.0, 0.0, 0.0]))
@@ -146,12 +224,19 @@ def material_from_mtl(name, st, where, warnings):
             mtype, alpha = bsdfs.ROUGH_DIELECTRIC, pr * pr
         else:
             mtype = bsdfs.DIELECTRIC
+    elif pm >= 0.5:
+        mtype, alpha = bsdfs.CONDUCTOR, (pr or 0.0) ** 2
+        base_black = not kd_given or kd.max() <= 0.0
+        ks = ks if ks_given and base_black else kd
+        if alpha <= 0.0:
+            mtype = bsdfs.MIRROR
+    elif pr is not None and pr > 0.0 and illum not in (3, 5):
+        mtype, alpha = bsdfs.PLASTIC, pr * pr
+        f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 if "Ni" in st and ior > 0.0 else 0.04
+        ks = np.full(3, f0)
     elif illum in (3, 5):
         mtype = bsdfs.MIRROR
         ks = ks if ks_given else np.ones(3)
-    elif pr is not None and pm >= 0.5:
-        mtype, alpha = bsdfs.CONDUCTOR, pr * pr
-        ks = ks if ks_given else kd
     elif ks_given and ks.max() > 0.0:
         mtype = bsdfs.PLASTIC
         alpha = bsdfs.ns_to_alpha(st.get("Ns", [0.0])[0])
@@ -159,12 +244,25 @@ def material_from_mtl(name, st, where, warnings):
             warn(warnings, f"{where}: material {name!r} has Kd + Ks > 1 (reflects more than it receives)")
     else:
         mtype = bsdfs.DIFFUSE
-    if pr is not None and mtype in (bsdfs.DIFFUSE, bsdfs.MIRROR, bsdfs.DIELECTRIC, bsdfs.PLASTIC) and pr > 0:
-        warn(warnings, f"{where}: material {name!r}: Pr without Pm 1 is ignored")
+    if pr is not None and pr > 0 and mtype in (bsdfs.MIRROR, bsdfs.DIELECTRIC):
+        warn(warnings, f"{where}: material {name!r}: Pr is ignored by its illum {illum}")
     if np.any(kd > 1.0) and mtype in (bsdfs.DIFFUSE, bsdfs.PLASTIC):
         warn(warnings, f"{where}: material {name!r} has Kd > 1 (reflects more than it receives)")
     param = np.array([*kd, *ks, alpha, ior], dtype=np.float64)
-    return mtype, param, ke.astype(np.float64)
+    tex = [-1] * N_TEX_SLOTS
+    for key, slot in _MTL_MAPS.items():
+        if key not in st or textures is None:
+            continue
+        file, uv, line = st[key]
+        if mtype == bsdfs.CONDUCTOR and key == "map_Kd" and slot == TEX_SLOT_KD:
+            slot = TEX_SLOT_KS  # a metal's base colour is its F0
+        if mtype in (bsdfs.DIELECTRIC, bsdfs.ROUGH_DIELECTRIC):
+            warn(warnings, f"{where}: material {name!r} is a dielectric: its {key} is ignored")
+            continue
+        base = param[3 * slot: 3 * slot + 3]
+        textures.append(TextureSpec("bitmap", file, uv=uv, fallback=tuple(base), where=f"{line} ({name!r}, {key})"))
+        tex[slot] = len(textures) - 1
+    return mtype, param, ke.astype(np.float64), tuple(tex)
 
 
 def _load_geometry(obj_path, scan):
@@ -200,6 +298,8 @@ def _load_geometry(obj_path, scan):
             v = v @ transform[:3, :3].T + transform[:3, 3]
         mat = getattr(getattr(g, "visual", None), "material", None)
         mname = getattr(mat, "name", None)
+        if mname not in scan.usemtl:
+            mname = None  # faces before any usemtl (trimesh names them "material_0" when vt is given)
         tris.append(v[np.asarray(g.faces, dtype=np.int64)])
         names.append((mname, len(g.faces)))
     if not tris:
@@ -207,23 +307,53 @@ def _load_geometry(obj_path, scan):
     return np.concatenate(tris, axis=0), names
 
 
-def read_geometry(obj_path):
-    """(tri (F, 3, 3), [(usemtl name or None, face count)], mtllib names, usemtl names) of an
-    OBJ: through the parallel reader (tracer.objread) when the file is made of the statements it
-    reads, else checked line by line (errors name the line) and read by trimesh; both give the
-    same triangles in the same order."""
+def read_geometry(obj_path, warnings=None):
+    """The ObjMesh of an OBJ (tracer.objread: triangles, groups, mtllib and usemtl names, corner
+    UVs and normals): through the parallel reader when the file is made of the statements it
+    reads, else checked line by line (errors name the line) and read by trimesh, with the UVs and
+    normals from the line-by-line scan, in the order tracer.objread.assemble gives (checked against
+    trimesh's triangles; where they differ, the UVs and normals are dropped with a warning). Both
+    give the same triangles in the same order."""
     fast = read_obj(check_text(obj_path, read_bytes(obj_path, "OBJ"), "OBJ"))  # (it frees the bytes once parsed)
     if fast is not None:
         return fast
     scan = scan_obj(obj_path)
     tri, groups = _load_geometry(obj_path, scan)
-    return tri, groups, scan.mtllibs, scan.usemtl
+    uv, normals = _corner_attributes(obj_path, scan, tri, groups, warnings)
+    return ObjMesh(tri, groups, scan.mtllibs, scan.usemtl, uv, normals)
+
+
+def _corner_attributes(obj_path, scan, tri, groups, warnings):
+    """(uv, normals) of the slow path's triangles from the scan's face corners, or Nones."""
+    idx = np.asarray(scan.corners, dtype=np.int64).reshape(-1, 3)
+    has_t, has_n = bool((idx[:, 1] >= 0).any()), bool((idx[:, 2] >= 0).any())
+    if not (has_t or has_n):
+        return None, None
+    counts = np.asarray(scan.counts, dtype=np.int64)
+    offsets = np.zeros(counts.size + 1, np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    got = assemble(idx, offsets, counts, np.asarray(scan.face_mat, dtype=np.int64), scan.usemtl)
+    verts = np.asarray(scan.positions, dtype=np.float64).reshape(-1, 3)
+    if got is None or got[1] != groups or not np.array_equal(verts[got[0][:, :, 0]], tri):
+        if warnings is not None:
+            warn(warnings, f"{obj_path}: its polygons are split in an order the reader cannot follow; "
+                           "texture coordinates and vertex normals are ignored")
+        return None, None
+    t = got[0]
+    uv = nrm = None
+    if has_t:
+        table = np.vstack([np.asarray(scan.texcoords, dtype=np.float64).reshape(-1, 2), np.zeros((1, 2))])
+        uv = table[t[:, :, 1]]  # -1 (a face without vt) picks the zero row
+    if has_n:
+        table = np.vstack([np.asarray(scan.normals, dtype=np.float64).reshape(-1, 3), np.zeros((1, 3))])
+        nrm = table[t[:, :, 2]]  # a zero row: a flat triangle
+    return uv, nrm
 
 
 @dataclass
 class ObjGeometry:
     """An OBJ's triangles with their materials: tri (F, 3, 3) float64; tri_material (F,) int32
-    index into `materials` [(name, type, param (8,), emission (3,))]; `undefined`: usemtl names
+    index into `materials` [(name, type, param (8,), emission (3,), tex)]; `undefined`: usemtl names
     no MTL defines (given diffuse 0.8), in the order the OBJ uses them; `mtllibs`: its MTL files."""
 
     tri: np.ndarray
@@ -231,20 +361,25 @@ class ObjGeometry:
     materials: list
     undefined: list
     mtllibs: list
+    uv: np.ndarray | None = None  # (F, 3, 2) corner UVs, or None
+    normals: np.ndarray | None = None  # (F, 3, 3) corner normals, or None
+    textures: list = None  # [TextureSpec] the materials' tex entries index
 
 
 def read_obj_scene(obj_path, warnings):
     """The geometry and materials of an OBJ and its MTL files (an ObjGeometry). A usemtl name no
     MTL defines gets a material of its own (diffuse 0.8; the sidecar may override it by that
     name); faces before any usemtl get "__default__"."""
-    tri, groups, mtllibs, usemtl = read_geometry(obj_path)
+    mesh = read_geometry(obj_path, warnings)
+    tri, groups, mtllibs, usemtl = mesh.tri, mesh.groups, mesh.mtllibs, mesh.usemtl
     mtl = {}
     for lib in mtllibs:
         mtl_path = os.path.join(os.path.dirname(obj_path), lib)
         if not os.path.isfile(mtl_path):
             raise SceneError(f"{obj_path}: MTL file {lib!r} not found (looked for {mtl_path})")
         mtl.update(parse_mtl(mtl_path, warnings))
-    materials = [(n, *material_from_mtl(n, mtl[n], obj_path, warnings)) for n in mtl]
+    textures = []
+    materials = [(n, *material_from_mtl(n, mtl[n], obj_path, warnings, textures)) for n in mtl]
     names = list(mtl)
     undefined = []
     tri_material = np.empty(tri.shape[0], dtype=np.int32)
@@ -263,4 +398,10 @@ def read_obj_scene(obj_path, warnings):
         tri_material[start : start + count] = names.index(mname)
         start += count
     undefined = [n for n in usemtl if n in undefined]  # in the order the OBJ uses them
-    return ObjGeometry(tri, tri_material, materials, undefined, list(mtllibs))
+    if textures and mesh.uv is None:
+        named = [materials[k][0] for k in np.unique(tri_material)
+                 if len(materials[k]) > 4 and max(materials[k][4]) >= 0]
+        if named:
+            warn(warnings, f"{obj_path}: the faces have no texture coordinates (vt): the textures of "
+                           f"{', '.join(repr(n) for n in named[:3])} are read at uv (0, 0)")
+    return ObjGeometry(tri, tri_material, materials, undefined, list(mtllibs), mesh.uv, mesh.normals, textures)

@@ -101,11 +101,12 @@ def sidecar_settings(sidecar, sidecar_path, overrides):
 
 
 def material_override(name, spec, base, where):
-    """Apply a sidecar `materials: {name: {...}}` entry to (type, param, emission)."""
+    """Apply a sidecar `materials: {name: {...}}` entry to (type, param, emission[, tex])."""
     if not isinstance(spec, dict):
         raise SceneError(f"{where}: materials.{name} must be an object")
     check_keys(f"{where}: materials.{name}", spec, MATERIAL_KEYS)
-    mtype, param, emission = base
+    mtype, param, emission = base[:3]
+    tex = list(base[3]) if len(base) > 3 else None
     param = param.copy()
     emission = emission.copy()
     if "type" in spec:
@@ -116,8 +117,12 @@ def material_override(name, spec, base, where):
         mtype = bsdfs.TYPE_NAMES.index(spec["type"])
     if "kd" in spec:
         param[0:3] = vec3(f"{where}: materials.{name}.kd", spec["kd"])
+        if tex:
+            tex[0] = -1  # a constant given here replaces the MTL's texture
     if "ks" in spec:
         param[3:6] = vec3(f"{where}: materials.{name}.ks", spec["ks"])
+        if tex:
+            tex[1] = -1
     if "alpha" in spec:
         param[6] = number(f"{where}: materials.{name}.alpha", spec["alpha"], lo=0.0)
     if "ior" in spec:
@@ -126,7 +131,9 @@ def material_override(name, spec, base, where):
         emission = vec3(f"{where}: materials.{name}.emission", spec["emission"])
     if param[:6].min() < 0.0 or emission.min() < 0.0:
         raise SceneError(f"{where}: materials.{name}: reflectances and emission must be >= 0")
-    return mtype, param, emission
+    if tex is None:
+        return mtype, param, emission
+    return mtype, param, emission, tuple(tex)
 
 
 def read_environment(spec, where):

@@ -33,6 +33,7 @@ from numba import prange
 from ... import bsdfs
 from ..._jit import jit, kernel
 from ...lights import sample_light
+from ...material import adjoint_factor, crosses, surface_at
 from ...rng import P_DIR, P_LIGHT, P_POS, P_RR, photon_dim, photon_key, uniform
 from ...sampling import (
     dot,
@@ -197,8 +198,8 @@ def emit(lt, tri, centre, radius, tri_eps, seed, iteration, g0, aim, key, o, d, 
 
 
 @kernel
-def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type, mat_param, gs, data_slot,
-            key, power, thr, depth, max_hits, rr_depth, tri_eps, alive, next_o, next_d,
+def scatter(active, d, t, prim, b1, b2, surf, gs, data_slot,
+            key, power, thr, depth, max_hits, rr_depth, alive, next_o, next_d,
             dep_node, dep_bin, dep_val, dep_x, dep_n, first_hit, imp, p_imp):
     """One hit for every active photon: deposit, then sample the BSDF (importance mode) and roulette.
 
@@ -207,6 +208,8 @@ def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type,
     (direct light) only if `first_hit`. Guided light tracing: at a non-delta hit whose voxel has
     an importance map in `imp` (a GuideState on gs's tree), the direction comes from that map with
     probability p_imp, else from the BSDF, and the photon's weight is f |cos| / the mixture's pdf.
+    surf: the scene's material.Surfaces; with shading normals the weight carries Veach's adjoint
+    correction (material.adjoint_factor) and is zero across the true surface (material.crosses).
     """
     n = active.shape[0]
     for k in prange(n):
@@ -216,11 +219,11 @@ def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type,
         p = prim[k]
         if p < 0:
             continue
-        x = triangle_point(tri, p, b1[k], b2[k])
-        ng = (tri_normal[p, 0], tri_normal[p, 1], tri_normal[p, 2])
-        m = tri_material[p]
+        x = triangle_point(surf.tri, p, b1[k], b2[k])
+        ng = (surf.normal[p, 0], surf.normal[p, 1], surf.normal[p, 2])
+        sf = surface_at(surf, p, b1[k], b2[k])
         win = (-d[k, 0], -d[k, 1], -d[k, 2])  # toward where the photon came from
-        delta = bsdfs.bsdf_is_delta(mat_type, mat_param, m)
+        delta = bsdfs.bsdf_is_delta(sf.bp)
         pw = (power[i, 0] * thr[i, 0], power[i, 1] * thr[i, 1], power[i, 2] * thr[i, 2])
         node = -1
         if not delta and (first_hit or depth[i] > 0 or p_imp > 0.0):
@@ -236,30 +239,34 @@ def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type,
         dk = depth[i]
         if dk + 1 >= max_hits:
             continue
-        s, tt = frame(ng)
+        s, tt, ns = sf.s, sf.t, sf.ns
         kk = key[i]
-        wo = to_local(win, s, tt, ng)
+        wo = to_local(win, s, tt, ns)
         u0 = uniform(kk, photon_dim(dk, 0))
         u1 = uniform(kk, photon_dim(dk, 1))
         u2 = uniform(kk, photon_dim(dk, 2))  # the strategy, then (rescaled) the BSDF's lobe
         islot = imp.slot[node] if node >= 0 else -1
         if islot >= 0 and u2 < p_imp:
             wiw, pg = map_sample(imp.rowcum, imp.dens, imp.wsum, imp.pscale, islot, imp.n_theta, imp.n_phi, u0, u1)
-            wi = to_local(wiw, s, tt, ng)
-            f = bsdfs.bsdf_eval(mat_type, mat_param, m, wo, wi, False)
-            pm = (1.0 - p_imp) * bsdfs.bsdf_pdf(mat_type, mat_param, m, wo, wi) + p_imp * pg
+            wi = to_local(wiw, s, tt, ns)
+            f = bsdfs.bsdf_eval(sf.bp, wo, wi, False)
+            pm = (1.0 - p_imp) * bsdfs.bsdf_pdf(sf.bp, wo, wi) + p_imp * pg
             wt = (0.0, 0.0, 0.0)
             if pm > 0.0:
                 wt = (f[0] / pm, f[1] / pm, f[2] / pm)
         else:
             if islot >= 0:
                 u2 = min((u2 - p_imp) / (1.0 - p_imp), 1.0 - 1e-12)
-            wi, wt, pdf, dlt = bsdfs.bsdf_sample(mat_type, mat_param, m, wo, u0, u1, u2, False)
+            wi, wt, pdf, dlt = bsdfs.bsdf_sample(sf.bp, wo, u0, u1, u2, False)
             if islot >= 0 and pdf > 0.0 and not dlt:
                 pm = (1.0 - p_imp) * pdf + p_imp * map_pdf(imp.dens, imp.pscale, islot, imp.n_theta, imp.n_phi,
-                                                          to_world(wi, s, tt, ng))
+                                                          to_world(wi, s, tt, ns))
                 r = pdf / pm
                 wt = (wt[0] * r, wt[1] * r, wt[2] * r)
+        if sf.smooth:
+            ww = to_world(wi, s, tt, ns)
+            cf = 0.0 if crosses(sf, dot(win, ng), ng, wo, wi, ww) else adjoint_factor(ng, ns, win, ww)
+            wt = (wt[0] * cf, wt[1] * cf, wt[2] * cf)
         nb = (thr[i, 0] * wt[0], thr[i, 1] * wt[1], thr[i, 2] * wt[2])
         bmax = max(nb[0], max(nb[1], nb[2]))
         if not (bmax > 0.0) or not math.isfinite(bmax):
@@ -269,8 +276,8 @@ def scatter(active, d, t, prim, b1, b2, tri, tri_normal, tri_material, mat_type,
             if uniform(kk, photon_dim(dk, P_RR)) >= q:
                 continue
             nb = (nb[0] / q, nb[1] / q, nb[2] / q)
-        w = to_world(wi, s, tt, ng)
-        sg = tri_eps[p] if dot(w, ng) >= 0.0 else -tri_eps[p]
+        w = to_world(wi, s, tt, ns)
+        sg = surf.eps[p] if dot(w, ng) >= 0.0 else -surf.eps[p]
         for c in range(3):
             thr[i, c] = nb[c]
             next_o[k, c] = x[c] + sg * ng[c]
@@ -364,9 +371,8 @@ def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 <<
             o, d = buf.ray_o[:m], buf.ray_d[:m]
             t, prim, b1, b2 = accel.intersect(o, d)
             rays += m
-            scatter(active[:m], d, t, prim, b1, b2, scene.tri, ctx.tri_normal, scene.tri_material,
-                    scene.materials.type, scene.materials.param, gs, data_slot, buf.key, buf.power, buf.thr,
-                    buf.depth, max_hits, ctx.rr_depth, ctx.tri_eps, buf.alive[:m], buf.next_o[:m], buf.next_d[:m],
+            scatter(active[:m], d, t, prim, b1, b2, ctx.surfaces, gs, data_slot, buf.key, buf.power, buf.thr,
+                    buf.depth, max_hits, ctx.rr_depth, buf.alive[:m], buf.next_o[:m], buf.next_d[:m],
                     buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m], buf.dep_n[:m], first_hit,
                     imp, float(p_imp))
             entered[active[:m][buf.dep_node[:m] >= 0]] = True

@@ -1,0 +1,206 @@
+"""The material at the hit (tracer.material): textures, UVs, shading normals, and MTL's maps.
+
+Checked against what the test computes itself: the texture image decoded from sRGB and filtered
+bilinearly with NumPy, the analytic normal field of a sphere, the glTF meaning of the PBR
+statements."""
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+
+import tracer
+from tracer import bsdfs
+from tracer.camera import camera_ray
+
+W = H = 16
+
+
+def _write_png(path, rgb8):
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(str(path))
+    spec = oiio.ImageSpec(rgb8.shape[1], rgb8.shape[0], 3, "uint8")
+    assert out.open(str(path), spec)
+    out.write_image(rgb8)
+    out.close()
+
+
+def _srgb_to_linear(c):
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _bilinear_repeat(img, u, v):
+    """The texture lookup written out here: texel centres at (i + 1/2) / size, rows from the top,
+    v upward, wrapping."""
+    h, w, _ = img.shape
+    x = u * w - 0.5
+    y = (1.0 - v) * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+    x0, y0 = x0.astype(int) % w, y0.astype(int) % h
+    x1, y1 = (x0 + 1) % w, (y0 + 1) % h
+    return ((1 - fy) * ((1 - fx) * img[y0, x0] + fx * img[y0, x1]) + fy * ((1 - fx) * img[y1, x0] + fx * img[y1, x1]))
+
+
+def _textured_quad(tmp_path, map_line, image):
+    _write_png(tmp_path / "tex.png", image)
+    obj = ["mtllib q.mtl", "usemtl tex", "v -1 -1 0", "v 1 -1 0", "v 1 1 0", "v -1 1 0",
+           "vt 0 0", "vt 1 0", "vt 1 1", "vt 0 1", "f 1/1 2/2 3/3 4/4"]
+    (tmp_path / "q.obj").write_text("\n".join(obj) + "\n")
+    (tmp_path / "q.mtl").write_text(f"newmtl tex\n{map_line}\n")
+    (tmp_path / "q.json").write_text(json.dumps({
+        "camera": {"origin": [0, 0, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 30},
+        "film": {"width": W, "height": H}, "environment": {"radiance": [1, 1, 1]}}))
+    return str(tmp_path / "q.obj")
+
+
+def _pixel_uv(scene):
+    """(u, v) where each pixel centre's camera ray meets the quad z = 0 spanning [-1, 1]^2."""
+    cam = scene.camera.packed()
+    uv = np.empty((H, W, 2))
+    for py in range(H):
+        for px in range(W):
+            o, d = camera_ray(cam, W, H, px, py, 0.5, 0.5)
+            t = -o[2] / d[2]
+            uv[py, px] = ((o[0] + t * d[0] + 1) / 2, (o[1] + t * d[1] + 1) / 2)
+    return uv
+
+
+@pytest.mark.parametrize("map_line,scale", [("map_Kd tex.png", (1, 1)), ("map_Kd -s 2 3 1 -o 0.25 0 tex.png", (2, 3))])
+def test_textured_quad_under_a_constant_sky(tmp_path, map_line, scale):
+    """A diffuse quad whose Kd is an 8 x 8 sRGB PNG, under a sky of radiance 1, direct light only:
+    each pixel (point filter) is the texture's linear value at its UV, here decoded from sRGB and
+    filtered bilinearly with repeat by NumPy (with the map's -s/-o). z-test of every pixel against
+    the render's own variance, |z| < 5 over 768 channel values, and chi-square of their mean
+    square; detects a texture read without sRGB decoding (2x off in the mid-tones), flipped v, a
+    texel offset of half a texel, nearest instead of bilinear filtering, an ignored scale or
+    offset."""
+    rng = np.random.default_rng(3)
+    image = rng.integers(0, 256, size=(8, 8, 3), dtype=np.uint8)
+    scene = tracer.load_scene(_textured_quad(tmp_path, map_line, image))
+    assert scene.textures.info.shape[0] == 1 and scene.tri_uv.shape == (2, 3, 2)
+    r = tracer.render(scene, spp=256, max_depth=2, seed=1, pixel_filter="point")
+    assert r.stats["nonfinite_samples"] == 0
+    uv = _pixel_uv(scene)
+    u = scale[0] * uv[..., 0] + (0.25 if scale[0] == 2 else 0.0)
+    v = scale[1] * uv[..., 1]
+    ref = _bilinear_repeat(_srgb_to_linear(image / 255.0), u, v)
+    z = (r.image - ref) / np.sqrt(np.maximum(r.variance, 1e-12))  # variance of the mean
+    assert np.abs(z).max() < 5.0, np.abs(z).max()
+    assert abs(np.mean(z ** 2) - 1.0) < 5 * math.sqrt(2.0 / z.size)
+    # the albedo AOV is the textured albedo
+    np.testing.assert_allclose(r.aovs["albedo"], ref, rtol=1e-5, atol=1e-6)
+    # the stats count the texture's memory: 8 x 8 RGB float32 texels and one info row
+    assert r.stats["texture_memory_bytes"] == 8 * 8 * 3 * 4 + scene.textures.info.nbytes
+
+
+def _sphere(n_theta, n_phi, radius=1.0):
+    """Vertices on the unit sphere (UV tessellation) and its triangles, counter-clockwise outside."""
+    verts = [(0.0, radius, 0.0)]
+    for i in range(1, n_theta):
+        th = math.pi * i / n_theta
+        for j in range(n_phi):
+            ph = 2 * math.pi * j / n_phi
+            verts.append((radius * math.sin(th) * math.cos(ph), radius * math.cos(th), -radius * math.sin(th) * math.sin(ph)))
+    verts.append((0.0, -radius, 0.0))
+    ring = lambda i, j: 1 + (i - 1) * n_phi + j % n_phi  # noqa: E731
+    faces = [(0, ring(1, j), ring(1, j + 1)) for j in range(n_phi)]
+    for i in range(1, n_theta - 1):
+        for j in range(n_phi):
+            faces += [(ring(i, j), ring(i + 1, j), ring(i + 1, j + 1)), (ring(i, j), ring(i + 1, j + 1), ring(i, j + 1))]
+    last = len(verts) - 1
+    faces += [(ring(n_theta - 1, j), last, ring(n_theta - 1, j + 1)) for j in range(n_phi)]
+    return np.array(verts), np.array(faces)
+
+
+def _sphere_scene(tmp_path, smooth):
+    v, f = _sphere(24, 48)
+    lines = ["mtllib s.mtl", "usemtl white"] + ["v %.17g %.17g %.17g" % tuple(p) for p in v]
+    if smooth:
+        lines += ["vn %.17g %.17g %.17g" % tuple(p) for p in v]
+        lines += ["f " + " ".join(f"{i + 1}//{i + 1}" for i in tri) for tri in f]
+    else:
+        lines += ["f " + " ".join(str(i + 1) for i in tri) for tri in f]
+    (tmp_path / "s.obj").write_text("\n".join(lines) + "\n")
+    (tmp_path / "s.mtl").write_text("newmtl white\nKd 0.5 0.5 0.5\n")
+    (tmp_path / "s.json").write_text(json.dumps({
+        "camera": {"origin": [0, 0, 4], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 35},
+        "film": {"width": 48, "height": 48}, "environment": {"radiance": [1, 1, 1]}}))
+    return tracer.load_scene(str(tmp_path / "s.obj"))
+
+
+def _analytic_normals(scene, w, h):
+    """The unit sphere's normal where each pixel centre's ray meets it (NaN: a miss)."""
+    cam = scene.camera.packed()
+    out = np.full((h, w, 3), np.nan)
+    for py in range(h):
+        for px in range(w):
+            o, d = map(np.array, camera_ray(cam, w, h, px, py, 0.5, 0.5))
+            b = o @ d
+            disc = b * b - (o @ o - 1.0)
+            if disc > 0:
+                out[py, px] = o + (-b - math.sqrt(disc)) * d
+    return out
+
+
+def test_smooth_shading_follows_the_sphere_normal_field(tmp_path):
+    """A 24 x 48 tessellated unit sphere with its exact vertex normals: the normal AOV at each
+    pixel centre (point filter) is the interpolated normal, within the tessellation's O(h^2)
+    error of the analytic normal where the ray meets the true sphere (pixels well inside the
+    silhouette), while the flat-shaded sphere is off by the O(h) facet angle. Detects vertex
+    normals ignored or read from the wrong corner (errors of the facet size or larger)."""
+    ang = {}
+    for smooth in (False, True):
+        scene = _sphere_scene(tmp_path, smooth)
+        assert (scene.tri_vn.shape[0] > 0) == smooth
+        r = tracer.render(scene, spp=1, max_depth=1, seed=0, pixel_filter="point")
+        ref = _analytic_normals(scene, 48, 48)
+        n = r.aovs["normal"]
+        inside = np.isfinite(ref[..., 0]) & (ref[..., 2] > 0.5)
+        cosang = np.clip(np.sum(n[inside] * ref[inside], axis=1), -1, 1)
+        ang[smooth] = np.degrees(np.arccos(cosang))
+    h = 180.0 / 24  # the tessellation's step in degrees
+    assert ang[False].mean() > 0.15 * h  # flat facets: a good share of the step
+    assert ang[True].max() < 0.1 * h and ang[True].mean() < 0.25 * ang[False].mean()
+
+
+def _one_material(tmp_path, body):
+    from tracer.readers.obj import material_from_mtl, parse_mtl
+
+    (tmp_path / "m.mtl").write_text("newmtl m\n" + body + "\n")
+    warnings, textures = [], []
+    st = parse_mtl(str(tmp_path / "m.mtl"), warnings)["m"]
+    return material_from_mtl("m", st, "m.obj", warnings, textures), warnings, textures
+
+
+def test_pbr_statements_mean_what_gltf_means():
+    """Blender's gold (illum 3, Kd base colour, Pm 1, Pr 0.2): a conductor with F0 = Kd and alpha
+    = Pr^2, not a grey mirror; the built-in scenes' metals (black Kd, F0 in Ks) keep F0 = Ks; Pr
+    without Pm: a plastic with F0 from Ni and alpha = Pr^2."""
+    import pathlib
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        d = pathlib.Path(d)
+        (t, p, e, tex), w, _ = _one_material(d, "Kd 1 0.77 0.34\nKs 0.5 0.5 0.5\nPm 1\nPr 0.2\nillum 3")
+        assert t == bsdfs.CONDUCTOR and np.allclose(p[3:6], [1, 0.77, 0.34]) and np.isclose(p[6], 0.04)
+        assert tex == (-1, -1) and not w
+        (t, p, e, tex), w, _ = _one_material(d, "Kd 0 0 0\nKs 0.9 0.9 0.9\nPr 0.5\nPm 1\nillum 2")
+        assert t == bsdfs.CONDUCTOR and np.allclose(p[3:6], 0.9) and np.isclose(p[6], 0.25)
+        (t, p, e, tex), w, _ = _one_material(d, "Kd 0.2 0.4 0.6\nKs 0.5 0.5 0.5\nPr 0.3\nNi 1.5\nillum 2")
+        assert t == bsdfs.PLASTIC and np.allclose(p[:3], [0.2, 0.4, 0.6]) and np.allclose(p[3:6], 0.04)
+        assert np.isclose(p[6], 0.09)
+
+
+def test_a_missing_texture_is_a_warning_with_its_fallback(tmp_path):
+    """map_Kd naming a file that does not exist: one warning naming the file and the constant used
+    (Kd), and the render reads that constant (albedo AOV)."""
+    obj = _textured_quad(tmp_path, "Kd 0.25 0.5 0.75\nmap_Kd missing.png", np.zeros((2, 2, 3), np.uint8))
+    scene = tracer.load_scene(obj)
+    msgs = [m for m in scene.warnings if "missing.png" in m]
+    assert len(msgs) == 1 and "0.25, 0.5, 0.75" in msgs[0]
+    r = tracer.render(scene, spp=1, max_depth=1, seed=0, pixel_filter="point")
+    np.testing.assert_allclose(r.aovs["albedo"], np.broadcast_to([0.25, 0.5, 0.75], (H, W, 3)))

@@ -1,0 +1,216 @@
+"""The material at a hit: (triangle, barycentrics) -> the BSDF there and its shading frame.
+
+`surface_at(surf, p, b1, b2)` is the one step every kernel that shades a point takes (the path
+tracer's shade, NEE, the photon tracer's scatter, the gradient-domain offsets, the records and
+AOVs): it evaluates the material's textures at the point's UV and builds the shading frame from
+the interpolated vertex normals. It returns a Surface: the BSDF at the point, `bp = (type,
+params)` as tracer.bsdfs takes it, and the frame (s, t, ns) in which its local directions live.
+
+Normals: `ng` (the triangle's geometric normal, counter-clockwise side) decides sides (one-sided
+emission, which side a ray is offset to, light leaks); `ns`, the interpolated vertex normal
+turned into ng's hemisphere (as pbrt-v4 orients them), is the +z of the BSDF's local frame.
+Without vertex normals ns is ng, bit for bit. `leak(ng, wo, wi, transmissive)` is the side test
+a shading normal needs: a reflection whose two directions lie on opposite sides of the true
+surface (or a refraction on one side) carries nothing. `adjoint_factor` is Veach's correction of
+the BSDF for importance (photon) transport with shading normals (Veach 1997, section 5.3).
+
+Textures (Textures, built by tracer.textures): one flat float32 RGB array for every image of
+the scene and one row of `info` per texture:
+
+    info[k] = [kind, offset, width, height, a, b, c, d, e, f, r0, g0, b0, r1, g1, b1]
+
+kind TEX_CONSTANT (colour r0 g0 b0), TEX_BITMAP (width x height texels at `offset`, row 0 the
+image's top, bilinear, repeat) or TEX_CHECKER (Mitsuba's checkerboard: colour 0 where the
+fractional parts of u and v are both above or both below 1/2, colour 1 elsewhere); (u, v) is
+first mapped by the affine (u', v') = (a u + b v + c, d u + e v + f). UVs follow the OBJ
+convention: v grows upward in the image, so texel row = (1 - v') height.
+
+`mat_tex[m]` names the texture of each slot of material m (TEX_SLOT_KD, TEX_SLOT_KS, -1: none): a
+slot's texture replaces the matching params (kd or ks).
+"""
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ._jit import jit
+from .bsdfs import bsdf_row
+from .sampling import dot, frame
+
+TEX_CONSTANT, TEX_BITMAP, TEX_CHECKER = 0, 1, 2
+TEX_SLOT_KD, TEX_SLOT_KS = 0, 1
+N_TEX_SLOTS = 2
+TEX_INFO_COLS = 16
+
+
+class Surfaces(NamedTuple):
+    """The scene's triangles and materials as the shading kernels read them (whole, read only)."""
+
+    tri: np.ndarray  # (F, 3, 3) float64 world vertices
+    normal: np.ndarray  # (F, 3) float64 unit geometric normal, counter-clockwise side
+    material: np.ndarray  # (F,) material index of each triangle
+    eps: np.ndarray  # (F,) float64 ray offset of each triangle (tracer.bvh.ray_offsets)
+    mat_type: np.ndarray  # (M,) int32 material type (tracer.bsdfs)
+    mat_param: np.ndarray  # (M, 8) float64 material parameters
+    uv: np.ndarray  # (F, 3, 2) float64 corner UVs, or (0, 3, 2): none in the scene
+    vn: np.ndarray  # (F, 3, 3) float64 corner normals (a zero row: flat), or (0, 3, 3): none
+    mat_tex: np.ndarray  # (M, N_TEX_SLOTS) int32 texture of each slot (-1: none)
+    tex_info: np.ndarray  # (T, TEX_INFO_COLS) float64, the module docstring's rows
+    tex_data: np.ndarray  # (texels * 3,) float32 linear RGB of every bitmap
+
+
+class Surface(NamedTuple):
+    """What surface_at returns."""
+
+    bp: tuple  # the BSDF at the point, (type, params) as tracer.bsdfs takes it
+    ns: tuple  # unit shading normal (+z of the local frame), in ng's hemisphere
+    s: tuple  # unit tangents: (s, t, ns) is the local frame
+    t: tuple
+    uv: tuple  # the point's (u, v) (0, 0 without UVs)
+    smooth: bool  # ns comes from vertex normals (else it is ng, and `crosses` is always False)
+
+
+@jit
+def _texel(tex_data, base, w, h, ix, iy):
+    ix = ix % w
+    iy = iy % h
+    j = base + 3 * (iy * w + ix)
+    return tex_data[j], tex_data[j + 1], tex_data[j + 2]
+
+
+@jit
+def texture_eval(tex_info, tex_data, k, u, v):
+    """Texture k at (u, v): a linear RGB 3-tuple (the module docstring's kinds)."""
+    kind = int(tex_info[k, 0])
+    uu = tex_info[k, 4] * u + tex_info[k, 5] * v + tex_info[k, 6]
+    vv = tex_info[k, 7] * u + tex_info[k, 8] * v + tex_info[k, 9]
+    if kind == TEX_CHECKER:
+        fu = uu - math.floor(uu)
+        fv = vv - math.floor(vv)
+        c = 10 if (fu > 0.5) == (fv > 0.5) else 13
+        return tex_info[k, c], tex_info[k, c + 1], tex_info[k, c + 2]
+    if kind != TEX_BITMAP:
+        return tex_info[k, 10], tex_info[k, 11], tex_info[k, 12]
+    base = int(tex_info[k, 1])
+    w = int(tex_info[k, 2])
+    h = int(tex_info[k, 3])
+    x = uu * w - 0.5
+    y = (1.0 - vv) * h - 0.5
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return 0.0, 0.0, 0.0
+    x0 = math.floor(x)
+    y0 = math.floor(y)
+    fx = x - x0
+    fy = y - y0
+    ix = int(x0 % w)
+    iy = int(y0 % h)
+    a = _texel(tex_data, base, w, h, ix, iy)
+    b = _texel(tex_data, base, w, h, ix + 1, iy)
+    c = _texel(tex_data, base, w, h, ix, iy + 1)
+    d = _texel(tex_data, base, w, h, ix + 1, iy + 1)
+    out0 = (1.0 - fy) * ((1.0 - fx) * a[0] + fx * b[0]) + fy * ((1.0 - fx) * c[0] + fx * d[0])
+    out1 = (1.0 - fy) * ((1.0 - fx) * a[1] + fx * b[1]) + fy * ((1.0 - fx) * c[1] + fx * d[1])
+    out2 = (1.0 - fy) * ((1.0 - fx) * a[2] + fx * b[2]) + fy * ((1.0 - fx) * c[2] + fx * d[2])
+    return out0, out1, out2
+
+
+@jit
+def shading_normal(surf, p, b1, b2, ng):
+    """Unit interpolated vertex normal of triangle p at (b1, b2), in ng's hemisphere; ng itself
+    where the triangle has none (a zero corner) or the interpolation vanishes."""
+    if surf.vn.shape[0] == 0:
+        return ng
+    b0 = 1.0 - b1 - b2
+    vn = surf.vn
+    n = (b0 * vn[p, 0, 0] + b1 * vn[p, 1, 0] + b2 * vn[p, 2, 0],
+         b0 * vn[p, 0, 1] + b1 * vn[p, 1, 1] + b2 * vn[p, 2, 1],
+         b0 * vn[p, 0, 2] + b1 * vn[p, 1, 2] + b2 * vn[p, 2, 2])
+    n2 = dot(n, n)
+    if not (n2 > 0.0 and math.isfinite(n2)):
+        return ng
+    inv = 1.0 / math.sqrt(n2)
+    if dot(n, ng) < 0.0:
+        inv = -inv
+    return (n[0] * inv, n[1] * inv, n[2] * inv)
+
+
+@jit
+def surface_uv(surf, p, b1, b2):
+    """(u, v) of triangle p at barycentrics (b1, b2); (0, 0) in a scene without UVs."""
+    if surf.uv.shape[0] == 0:
+        return 0.0, 0.0
+    b0 = 1.0 - b1 - b2
+    uv = surf.uv
+    return (b0 * uv[p, 0, 0] + b1 * uv[p, 1, 0] + b2 * uv[p, 2, 0],
+            b0 * uv[p, 0, 1] + b1 * uv[p, 1, 1] + b2 * uv[p, 2, 1])
+
+
+@jit(inline="always")
+def surface_at(surf, p, b1, b2):
+    """The Surface of triangle p at barycentrics (b1, b2): its BSDF with textures evaluated, and
+    its shading frame."""
+    m = surf.material[p]
+    bp = bsdf_row(surf.mat_type, surf.mat_param, m)
+    ng = (surf.normal[p, 0], surf.normal[p, 1], surf.normal[p, 2])
+    uv = (0.0, 0.0)
+    if surf.mat_tex.shape[0] > 0 and (surf.mat_tex[m, TEX_SLOT_KD] >= 0 or surf.mat_tex[m, TEX_SLOT_KS] >= 0):
+        uv = surface_uv(surf, p, b1, b2)
+        t, prm = bp
+        kd = (prm[0], prm[1], prm[2])
+        ks = (prm[3], prm[4], prm[5])
+        if surf.mat_tex[m, TEX_SLOT_KD] >= 0:
+            kd = texture_eval(surf.tex_info, surf.tex_data, surf.mat_tex[m, TEX_SLOT_KD], uv[0], uv[1])
+        if surf.mat_tex[m, TEX_SLOT_KS] >= 0:
+            ks = texture_eval(surf.tex_info, surf.tex_data, surf.mat_tex[m, TEX_SLOT_KS], uv[0], uv[1])
+        bp = (t, (kd[0], kd[1], kd[2], ks[0], ks[1], ks[2], prm[6], prm[7]))
+    ns = shading_normal(surf, p, b1, b2, ng)
+    s, tt = frame(ns)
+    return Surface(bp, ns, s, tt, uv, surf.vn.shape[0] > 0)
+
+
+@jit
+def barycentrics(tri, p, x):
+    """(b1, b2) of the point x on triangle p's plane (the inverse of sampling.triangle_point)."""
+    e1 = (tri[p, 1, 0] - tri[p, 0, 0], tri[p, 1, 1] - tri[p, 0, 1], tri[p, 1, 2] - tri[p, 0, 2])
+    e2 = (tri[p, 2, 0] - tri[p, 0, 0], tri[p, 2, 1] - tri[p, 0, 1], tri[p, 2, 2] - tri[p, 0, 2])
+    d = (x[0] - tri[p, 0, 0], x[1] - tri[p, 0, 1], x[2] - tri[p, 0, 2])
+    a11 = dot(e1, e1)
+    a12 = dot(e1, e2)
+    a22 = dot(e2, e2)
+    r1 = dot(d, e1)
+    r2 = dot(d, e2)
+    det = a11 * a22 - a12 * a12
+    if not det > 0.0:
+        return 0.0, 0.0
+    return (a22 * r1 - a12 * r2) / det, (a11 * r2 - a12 * r1) / det
+
+
+@jit(inline="always")
+def surface_at_point(surf, p, x):
+    """surface_at for a point x known by position only (the gradient-domain offsets)."""
+    if surf.vn.shape[0] == 0 and surf.mat_tex.shape[0] == 0:
+        return surface_at(surf, p, 0.0, 0.0)
+    b1, b2 = barycentrics(surf.tri, p, x)
+    return surface_at(surf, p, b1, b2)
+
+
+@jit(inline="always")
+def crosses(sf, cos_o, ng, wo, wi, wiw):
+    """True where a scattering wo -> wi (local to sf's frame; wiw is wi in world space) reflects in
+    the shading frame and refracts through the true surface (normal ng, cos_o = the world wo's
+    cosine with it), or the reverse: a light leak that only shading normals make possible. The
+    BSDF is taken as zero there (eval, NEE and a sample alike). Always False where sf is flat."""
+    if not sf.smooth:
+        return False
+    return (wo[2] * wi[2] > 0.0) != (cos_o * dot(wiw, ng) > 0.0)
+
+
+@jit(inline="always")
+def adjoint_factor(ng, ns, wo, wi):
+    """Veach's correction of f for importance transport with shading normals:
+    |wo.ns| |wi.ng| / (|wo.ng| |wi.ns|), wo toward where the particle came from, wi where it goes
+    (1 where ns is ng); 0 where it is undefined."""
+    den = abs(dot(wo, ng)) * abs(dot(wi, ns))
+    if not den > 0.0:
+        return 0.0
+    return abs(dot(wo, ns)) * abs(dot(wi, ng)) / den
