@@ -90,3 +90,37 @@ def light_quad(folder, radiance, width=8, height=8):
         {"camera": {"origin": [0, 0, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 30},
          "film": {"width": width, "height": height}, "render": {"spp": 4, "max_depth": 1}},
     )
+
+
+def textured(scene):
+    """`scene` (a loaded Scene, changed in place and returned) with what the material step reads:
+    planar UVs, a checkerboard (two colours, 4 x 4 per unit of UV) on the kd of every diffuse
+    material, and corner normals tilted off the face normals by up to ~10 degrees, varying
+    smoothly with position (shading normals: the light-leak mask and the photons' adjoint factor
+    act)."""
+    from tracer import bsdfs
+    from tracer.textures import TextureSpec, build_textures
+
+    tri = scene.tri
+    uv = 0.37 * np.stack([tri[..., 0] + tri[..., 2], tri[..., 1]], axis=-1)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    tilt = 0.17 * np.sin(np.stack([2.1 * tri[..., 1] + 0.3, 1.7 * tri[..., 2] + 1.1, 1.3 * tri[..., 0] + 2.0], -1))
+    vn = n[:, None, :] + tilt
+    vn /= np.linalg.norm(vn, axis=2, keepdims=True)
+    scene.tri_uv = np.ascontiguousarray(uv)
+    scene.tri_vn = np.ascontiguousarray(vn)
+    scene.textures = build_textures([TextureSpec("checker", color0=(0.8, 0.35, 0.2), color1=(0.25, 0.6, 0.75),
+                                                 uv=(4.0, 0.0, 0.0, 0.0, 4.0, 0.0))], [])
+    scene.materials.tex = np.full((len(scene.materials.names), 2), -1, np.int32)
+    scene.materials.tex[scene.materials.type == bsdfs.DIFFUSE, 0] = 0
+    return scene
+
+
+def builtin(root, name, width, height):
+    """A built-in scene by name at width x height; `NAME-textured` is NAME through textured()."""
+    import tracer
+
+    base = name[: -len("-textured")] if name.endswith("-textured") else name
+    scene = tracer.load_scene(os.path.join(root, "scenes", base, f"{base}.obj"), width=width, height=height)
+    return textured(scene) if base != name else scene

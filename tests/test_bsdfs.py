@@ -23,10 +23,10 @@ PLASTIC_KD = (0.5, 0.3, 0.2)
 PLASTIC_KS = (0.4, 0.4, 0.4)
 
 
-def material(t, alpha=0.3, ior=1.5, kd=KD, ks=KS):
-    """One material as (mat_type (1,) int32, mat_param (1, 8) float64)."""
+def material(t, alpha=0.3, ior=1.5, kd=KD, ks=KS, eta=(0.0, 0.0, 0.0), k=(0.0, 0.0, 0.0), flags=0):
+    """One material as (mat_type (1,) int32, mat_param (1, N_PARAM) float64)."""
     mat_type = np.array([t], dtype=np.int32)
-    mat_param = np.array([[*kd, *ks, alpha, ior]], dtype=np.float64)
+    mat_param = np.array([[*kd, *ks, alpha, ior, *eta, *k, flags, 0.0]], dtype=np.float64)
     return mat_type, mat_param
 
 
@@ -58,6 +58,9 @@ CASES += [
     ("rough_dielectric", B.ROUGH_DIELECTRIC, dict(alpha=0.3, ior=1.33), z) for z in (0.8, -0.6)
 ]
 CASES += [("rough_dielectric", B.ROUGH_DIELECTRIC, dict(alpha=0.3, ior=1.5), 1.0)]
+GOLD = dict(eta=(0.143036, 0.375307, 1.44205), k=(3.983, 2.38556, 1.60336))  # tracer.metals "Au"
+CASES += [("metal", B.METAL, dict(alpha=0.3, **GOLD), z) for z in WO_TWO_SIDED]
+CASES += [("metal_beckmann", B.METAL, dict(alpha=0.3, flags=B.BECKMANN, **GOLD), z) for z in (0.8, 0.1)]
 
 
 def case_id(c):
@@ -449,17 +452,22 @@ def test_finite_outputs(t, kw):
 
 # --- Small helpers -------------------------------------------------------------------------------
 def test_is_delta_and_albedo():
-    kinds = [B.DIFFUSE, B.CONDUCTOR, B.MIRROR, B.DIELECTRIC, B.ROUGH_DIELECTRIC, B.PLASTIC]
-    assert [B.TYPE_NAMES[k] for k in kinds] == list(B.TYPE_NAMES)
+    kinds = [B.DIFFUSE, B.CONDUCTOR, B.MIRROR, B.DIELECTRIC, B.ROUGH_DIELECTRIC, B.PLASTIC, B.METAL, B.METAL,
+             B.THIN_DIELECTRIC]
+    assert [B.TYPE_NAMES[k] for k in kinds[:7]] + [B.TYPE_NAMES[kinds[8]]] == list(B.TYPE_NAMES)
     mat_type = np.array(kinds, dtype=np.int32)
-    mat_param = np.tile([*KD, *KS, 1e-5, 1.5], (6, 1))
-    assert [B.bsdf_is_delta(B.bsdf_row(mat_type, mat_param, m)) for m in range(6)] == [
-        False, False, True, True, False, False,
+    mat_param = np.tile([*KD, *KS, 1e-5, 1.5, *GOLD["eta"], *GOLD["k"], 0, 0], (9, 1))
+    mat_param[7, 6] = 0.0  # a smooth METAL
+    assert [B.bsdf_is_delta(B.bsdf_row(mat_type, mat_param, m)) for m in range(9)] == [
+        False, False, True, True, False, False, False, True, True,
     ]
-    albedo = [B.bsdf_albedo(B.bsdf_row(mat_type, mat_param, m)) for m in range(6)]
+    albedo = [B.bsdf_albedo(B.bsdf_row(mat_type, mat_param, m)) for m in range(9)]
     assert albedo[0] == KD and albedo[1] == KS and albedo[2] == KS
-    assert albedo[3] == (1.0, 1.0, 1.0) and albedo[4] == (1.0, 1.0, 1.0)
+    assert albedo[3] == (1.0, 1.0, 1.0) and albedo[4] == (1.0, 1.0, 1.0) and albedo[8] == (1.0, 1.0, 1.0)
     np.testing.assert_allclose(albedo[5], np.minimum(np.add(KD, KS), 1.0))
+    # METAL: ks times the normal-incidence reflectance of eta + i k, |(n - 1 + ik) / (n + 1 + ik)|^2
+    n, k = np.array(GOLD["eta"]), np.array(GOLD["k"])
+    np.testing.assert_allclose(albedo[6], np.array(KS) * ((n - 1) ** 2 + k ** 2) / ((n + 1) ** 2 + k ** 2), rtol=1e-12)
 
 
 def test_lum_and_ns_to_alpha():

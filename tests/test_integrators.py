@@ -94,16 +94,18 @@ def test_nee_off_gpt_replay_is_unbiased():
     assert np.all(np.abs(z) < z_critical(3)), (z, m0, m1)
 
 
-@pytest.mark.parametrize("guide,shift", [("photon", "replay"), ("odis", "replay"), ("photon", "hybrid"),
-                                         ("grid", "hybrid")])
-def test_guided_gpt_gradients_are_the_differences_of_the_path_tracers_pixels(guide, shift):
+@pytest.mark.parametrize("guide,shift,name", [("photon", "replay", "cornell"), ("odis", "replay", "cornell"),
+                                              ("photon", "hybrid", "cornell"), ("grid", "hybrid", "cornell"),
+                                              ("photon", "hybrid", "ajar-textured")])
+def test_guided_gpt_gradients_are_the_differences_of_the_path_tracers_pixels(guide, shift, name):
     """gpt with a guide: the guide trains by its own schedule, then base and offsets sample its
     mixture (the hybrid shift gives each offset its own pixel's mixture density in its weights).
     Per-pixel z-scores of dx, dy against an unguided path render's pixel differences
     (tests/gradient/zscores.py): their mean over m pixels, times sqrt(m), is a z-score; a
     gradient biased by a shift that drops the offset's own mixture density would move it by
-    several units."""
-    for key, z in gradient_z("cornell", 24, 64, 512, shift=shift, guide=guide):
+    several units. `ajar-textured` (tests/scenes.textured): textures and shading normals at the
+    offsets' own vertices."""
+    for key, z in gradient_z(name, 24, 64, 512, shift=shift, guide=guide):
         m = z.size
         assert m > 100
         assert abs(z.mean()) * np.sqrt(m) < z_critical(2), f"{guide} {shift} {key}: mean z {z.mean():.3f}"

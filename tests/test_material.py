@@ -204,3 +204,25 @@ def test_a_missing_texture_is_a_warning_with_its_fallback(tmp_path):
     assert len(msgs) == 1 and "0.25, 0.5, 0.75" in msgs[0]
     r = tracer.render(scene, spp=1, max_depth=1, seed=0, pixel_filter="point")
     np.testing.assert_allclose(r.aovs["albedo"], np.broadcast_to([0.25, 0.5, 0.75], (H, W, 3)))
+
+
+def test_sidecar_makes_a_named_metal(tmp_path):
+    """materials.NAME {type metal, metal Au, one_sided}: the table row holds Au's complex index from
+    tracer.metals and the ONE_SIDED flag; an unknown metal is one error listing the names."""
+    from tracer.errors import SceneError
+    from tracer.metals import METALS
+
+    obj = _textured_quad(tmp_path, "Kd 0.5 0.5 0.5", np.zeros((2, 2, 3), np.uint8))
+    side = json.loads((tmp_path / "q.json").read_text())
+    side["materials"] = {"tex": {"type": "metal", "metal": "Au", "alpha": 0.1, "one_sided": True}}
+    (tmp_path / "q.json").write_text(json.dumps(side))
+    scene = tracer.load_scene(obj)
+    row = scene.materials.param[scene.materials.names.index("tex")]
+    assert scene.materials.type[scene.materials.names.index("tex")] == bsdfs.METAL
+    np.testing.assert_array_equal(row[8:11], METALS["Au"][0])
+    np.testing.assert_array_equal(row[11:14], METALS["Au"][1])
+    assert int(row[14]) & bsdfs.ONE_SIDED and row[6] == 0.1
+    side["materials"]["tex"]["metal"] = "Unobtainium"
+    (tmp_path / "q.json").write_text(json.dumps(side))
+    with pytest.raises(SceneError, match="Unobtainium.*valid: .*Au"):
+        tracer.load_scene(obj)

@@ -3,10 +3,12 @@
 Materials are a struct of arrays shared with the scene loader and the integrator:
 
     mat_type  : (M,) int32, one of the type constants below
-    mat_param : (M, 8) float64, columns [kd_r, kd_g, kd_b, ks_r, ks_g, ks_b, alpha, ior]
+    mat_param : (M, N_PARAM) float64, columns [kd_r, kd_g, kd_b, ks_r, ks_g, ks_b, alpha, ior,
+                eta_r, eta_g, eta_b, k_r, k_g, k_b, flags, 0] (P_* below; eta and k: METAL's
+                complex index; flags: ONE_SIDED, BECKMANN)
 
 Every function takes the BSDF at one point, `bp = (type, params)`: the type constant and the
-eight columns above as a tuple, with textures already evaluated there (tracer.material.surface_at
+columns above as a tuple, with textures already evaluated there (tracer.material.surface_at
 makes it at a hit; `bsdf_row` from a table row).
 
 Frames and measures
@@ -18,8 +20,9 @@ is the discrete probability of the lobe. What the integrator multiplies into the
 is always `f * |cos wi|` (from `bsdf_eval`) or the sample weight `f * |cos wi| / pdf` (from
 `bsdf_sample`), never a raw 1/pdf.
 
-- DIFFUSE, CONDUCTOR, MIRROR, PLASTIC are two-sided: when wo.z < 0 they mirror the frame, and
-  reflection requires wo.z * wi.z > 0.
+- DIFFUSE, CONDUCTOR, MIRROR, PLASTIC, METAL are two-sided unless their ONE_SIDED flag is set
+  (then black for wo.z <= 0, as Mitsuba's BSDFs without `twosided`): when wo.z < 0 they mirror
+  the frame, and reflection requires wo.z * wi.z > 0. THIN_DIELECTRIC is symmetric.
 - DIELECTRIC, ROUGH_DIELECTRIC: wo.z > 0 means wo is outside (index 1), wo.z < 0 inside (index
   ior). Transmission requires wo.z * wi.z < 0.
 - `radiance=True` (camera paths) scales refraction by (n_o / n_i)^2, n_o the index on the side of
@@ -29,7 +32,8 @@ is always `f * |cos wi|` (from `bsdf_eval`) or the sample weight `f * |cos wi| /
 Microfacet models use the isotropic GGX distribution with the height-correlated Smith masking
 G2 and sample visible normals (Heitz 2018, "Sampling the GGX Distribution of Visible Normals");
 the rough dielectric follows Walter et al. 2007 ("Microfacet Models for Refraction through
-Rough Surfaces").
+Rough Surfaces"). METAL is Mitsuba 3's conductor as Mitsuba computes it: separable masking
+G1(wo) G1(wi), GGX sampled by visible normals or Beckmann by D(h) cos (tests/test_mitsuba_bsdfs.py).
 """
 import math
 
@@ -45,8 +49,18 @@ MIRROR = 2  # smooth perfect conductor tinted by ks (F = ks), two-sided, delta
 DIELECTRIC = 3  # smooth dielectric, interior index ior, exterior 1, exact Fresnel, delta
 ROUGH_DIELECTRIC = 4  # GGX rough dielectric (Walter et al. 2007), VNDF sampling
 PLASTIC = 5  # kd / pi + ks * D G / (4 cos_i cos_o), no Fresnel, two-sided
-TYPE_NAMES = ("diffuse", "conductor", "mirror", "dielectric", "rough_dielectric", "plastic")
+METAL = 6  # Mitsuba's conductor / roughconductor: complex Fresnel (eta, k) x ks; GGX or Beckmann; delta at alpha 0
+THIN_DIELECTRIC = 7  # Mitsuba's thindielectric: a thin slab, reflection and straight transmission, delta
+TYPE_NAMES = ("diffuse", "conductor", "mirror", "dielectric", "rough_dielectric", "plastic", "metal",
+              "thin_dielectric")
 ALPHA_MIN = 1e-4  # every GGX evaluation clamps alpha to at least this
+
+# Columns of a material's parameters (mat_param[m], the `params` of bp)
+N_PARAM = 16
+P_KD, P_KS, P_ALPHA, P_IOR, P_ETA, P_K, P_FLAGS = 0, 3, 6, 7, 8, 11, 14
+# Bits of params[P_FLAGS]
+ONE_SIDED = 1  # reflects only on the side of its normal (Mitsuba's BSDFs unless `twosided`); black behind
+BECKMANN = 2  # the Beckmann distribution (METAL), sampled by D(h) cos (Mitsuba's sample_visible false)
 
 _ZERO3 = (0.0, 0.0, 0.0)
 
@@ -92,8 +106,14 @@ def _scale3(a, s):
 def bsdf_row(mat_type, mat_param, m):
     """The BSDF of material m as its table row gives it, untextured: (type, params), the form
     every function below takes (tracer.material.surface_at gives the one at a hit point)."""
+    if mat_param.shape[1] < N_PARAM:  # a table of the first eight columns only (tests, old callers)
+        return (mat_type[m], (mat_param[m, 0], mat_param[m, 1], mat_param[m, 2], mat_param[m, 3], mat_param[m, 4],
+                              mat_param[m, 5], mat_param[m, 6], mat_param[m, 7], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                              0.0))
     return (mat_type[m], (mat_param[m, 0], mat_param[m, 1], mat_param[m, 2], mat_param[m, 3], mat_param[m, 4],
-                          mat_param[m, 5], mat_param[m, 6], mat_param[m, 7]))
+                          mat_param[m, 5], mat_param[m, 6], mat_param[m, 7], mat_param[m, 8], mat_param[m, 9],
+                          mat_param[m, 10], mat_param[m, 11], mat_param[m, 12], mat_param[m, 13],
+                          mat_param[m, 14], mat_param[m, 15]))
 
 
 @jit
@@ -472,6 +492,145 @@ def _plastic_sample(kd, ks, alpha, wo, u0, u1, u2):
     return wi, _scale3(fcos, 1.0 / pdf), pdf, False
 
 
+# --- Mitsuba's conductor (complex Fresnel; GGX or Beckmann; separable masking) ----------------
+@jit
+def fresnel_conductor(cos_i, eta, k):
+    """Unpolarised Fresnel reflectance of a conductor of complex index eta + i k (relative to the
+    outside) at incidence cosine cos_i in [0, 1] (the exact formula, as in Moeller's "Optics");
+    exactly 1 for eta = k = 0 (Mitsuba's material "none")."""
+    c2 = cos_i * cos_i
+    s2 = 1.0 - c2
+    s4 = s2 * s2
+    t1 = eta * eta - k * k - s2
+    a2b2 = math.sqrt(max(t1 * t1 + 4.0 * k * k * eta * eta, 0.0))
+    a = math.sqrt(max(0.5 * (a2b2 + t1), 0.0))
+    term1 = a2b2 + c2
+    term2 = 2.0 * cos_i * a
+    rs = (term1 - term2) / (term1 + term2)
+    term3 = a2b2 * c2 + s4
+    term4 = term2 * s2
+    rp = rs * (term3 - term4) / (term3 + term4)
+    return 0.5 * (rs + rp)
+
+
+@jit
+def _metal_f(prm, cos_h):
+    """ks x Fresnel per channel at cos_h."""
+    return (prm[3] * fresnel_conductor(cos_h, prm[8], prm[11]), prm[4] * fresnel_conductor(cos_h, prm[9], prm[12]),
+            prm[5] * fresnel_conductor(cos_h, prm[10], prm[13]))
+
+
+@jit
+def beckmann_d(h, alpha):
+    """Beckmann density of microfacet normals exp(-tan^2 / a^2) / (pi a^2 cos^4); 0 below."""
+    if h[2] <= 0.0:
+        return 0.0
+    c2 = h[2] * h[2]
+    t2 = (h[0] * h[0] + h[1] * h[1]) / c2
+    return math.exp(-t2 / (alpha * alpha)) / (math.pi * alpha * alpha * c2 * c2)
+
+
+@jit
+def smith_g1(w, h, alpha, beckmann):
+    """Smith's G1 of direction w for microfacet normal h, as Mitsuba 3 evaluates it: GGX exact,
+    Beckmann by Walter et al.'s rational fit; 0 where w sees the back of the microfacet."""
+    if dot(w, h) * w[2] <= 0.0:
+        return 0.0
+    xy2 = alpha * alpha * (w[0] * w[0] + w[1] * w[1])
+    if xy2 == 0.0:
+        return 1.0
+    t2 = xy2 / (w[2] * w[2])
+    if not beckmann:
+        return 2.0 / (1.0 + math.sqrt(1.0 + t2))
+    a = 1.0 / math.sqrt(t2)
+    if a >= 1.6:
+        return 1.0
+    return (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a)
+
+
+@jit
+def _metal_frame(prm, wo):
+    """(w, ok): wo in the upper hemisphere, or not ok (a one-sided metal seen from behind)."""
+    if wo[2] == 0.0 or (wo[2] < 0.0 and int(prm[14]) & ONE_SIDED):
+        return wo, False
+    return _upper(wo), True
+
+
+@jit
+def _metal_sample(prm, wo, u0, u1):
+    w, ok = _metal_frame(prm, wo)
+    if not ok:
+        return _fail()
+    alpha = prm[6]
+    if alpha <= 0.0:
+        return (-wo[0], -wo[1], wo[2]), _metal_f(prm, w[2]), 1.0, True
+    alpha = max(alpha, ALPHA_MIN)
+    beck = int(prm[14]) & BECKMANN
+    if beck:
+        # D(h) cos(h): tan^2 = -a^2 log(1 - u0)
+        t2 = -alpha * alpha * math.log(1.0 - u0)
+        c = 1.0 / math.sqrt(1.0 + t2)
+        sn = math.sqrt(max(0.0, 1.0 - c * c))
+        phi = 2.0 * math.pi * u1
+        h = (sn * math.cos(phi), sn * math.sin(phi), c)
+    else:
+        h = sample_ggx_vndf(w, alpha, u0, u1)
+    cos_oh = dot(w, h)
+    wl = _reflect(w, h)
+    if cos_oh <= 0.0 or wl[2] <= 0.0:
+        return _fail()
+    pdf = _metal_pdf_h(w, h, alpha, beck)
+    if not pdf > 0.0:
+        return _fail()
+    fc = _metal_fcos(prm, w, wl, h, alpha, beck)
+    wi = (wl[0], wl[1], wl[2] if wo[2] > 0.0 else -wl[2])
+    return wi, _scale3(fc, 1.0 / pdf), pdf, False
+
+
+@jit
+def _metal_pdf_h(w, h, alpha, beck):
+    """Density of the reflected direction about h: visible normals (GGX) or D(h) cos(h)
+    (Beckmann), over the Jacobian 4 w.h."""
+    cos_oh = dot(w, h)
+    if cos_oh <= 0.0:
+        return 0.0
+    if beck:
+        return beckmann_d(h, alpha) * h[2] / (4.0 * cos_oh)
+    return smith_g1(w, h, alpha, False) * ggx_d(h, alpha) / (4.0 * w[2])
+
+
+@jit
+def _metal_fcos(prm, w, wl, h, alpha, beck):
+    """F D G1(w) G1(wl) / (4 w.z) (f |cos wl|), both in the upper hemisphere."""
+    d = beckmann_d(h, alpha) if beck else ggx_d(h, alpha)
+    g = smith_g1(w, h, alpha, beck) * smith_g1(wl, h, alpha, beck)
+    return _scale3(_metal_f(prm, dot(w, h)), d * g / (4.0 * w[2]))
+
+
+@jit
+def _metal_eval_pdf(prm, wo, wi):
+    if wo[2] * wi[2] <= 0.0 or prm[6] <= 0.0:
+        return _ZERO3, 0.0
+    w, ok = _metal_frame(prm, wo)
+    if not ok:
+        return _ZERO3, 0.0
+    wl = _upper(wi)
+    alpha = max(prm[6], ALPHA_MIN)
+    beck = int(prm[14]) & BECKMANN
+    h = normalize((w[0] + wl[0], w[1] + wl[1], w[2] + wl[2]))
+    return _metal_fcos(prm, w, wl, h, alpha, beck), _metal_pdf_h(w, h, alpha, beck)
+
+
+# --- Mitsuba's thin dielectric -------------------------------------------------------------------
+@jit
+def _thin_reflectance(prm, wo):
+    """Reflectance of the slab at wo, inter-reflections included: R + T^2 R / (1 - R^2)."""
+    r, _ = fresnel_dielectric(abs(wo[2]), prm[7])
+    if r < 1.0:
+        r = 2.0 * r / (1.0 + r)
+    return r
+
+
 # --- Public interface: dispatch on the material type -------------------------------------------
 @jit
 def bsdf_sample(bp, wo, u0, u1, u2, radiance):
@@ -484,6 +643,8 @@ def bsdf_sample(bp, wo, u0, u1, u2, radiance):
     wi = weight = (0, 0, 0), pdf 0, delta False.
     """
     t, prm = bp
+    if prm[14] != 0.0 and int(prm[14]) & ONE_SIDED and wo[2] <= 0.0:
+        return _fail()
     if t == DIFFUSE:
         return _diffuse_sample(_kd(prm), wo, u0, u1)
     if t == CONDUCTOR:
@@ -500,6 +661,15 @@ def bsdf_sample(bp, wo, u0, u1, u2, radiance):
         return _plastic_sample(
             _kd(prm), _ks(prm), _alpha(prm), wo, u0, u1, u2
         )
+    if t == METAL:
+        return _metal_sample(prm, wo, u0, u1)
+    if t == THIN_DIELECTRIC:
+        if wo[2] == 0.0:
+            return _fail()
+        r = _thin_reflectance(prm, wo)
+        if u2 < r:
+            return (-wo[0], -wo[1], wo[2]), (1.0, 1.0, 1.0), r, True
+        return (-wo[0], -wo[1], -wo[2]), (1.0, 1.0, 1.0), 1.0 - r, True
     return _fail()
 
 
@@ -507,6 +677,8 @@ def bsdf_sample(bp, wo, u0, u1, u2, radiance):
 def bsdf_eval(bp, wo, wi, radiance):
     """f(wo, wi) |cos wi| as a 3-tuple (local frame); (0, 0, 0) for delta materials."""
     t, prm = bp
+    if prm[14] != 0.0 and int(prm[14]) & ONE_SIDED and wo[2] <= 0.0:
+        return _ZERO3
     if t == DIFFUSE:
         return _diffuse_eval(_kd(prm), wo, wi)
     if t == CONDUCTOR:
@@ -521,6 +693,9 @@ def bsdf_eval(bp, wo, wi, radiance):
             _kd(prm), _ks(prm), _alpha(prm), wo, wi
         )
         return fcos
+    if t == METAL:
+        fcos, _ = _metal_eval_pdf(prm, wo, wi)
+        return fcos
     return _ZERO3
 
 
@@ -528,6 +703,8 @@ def bsdf_eval(bp, wo, wi, radiance):
 def bsdf_pdf(bp, wo, wi):
     """Solid-angle density with which `bsdf_sample` produces wi; 0 for delta materials."""
     t, prm = bp
+    if prm[14] != 0.0 and int(prm[14]) & ONE_SIDED and wo[2] <= 0.0:
+        return 0.0
     if t == DIFFUSE:
         return _diffuse_pdf(wo, wi)
     if t == CONDUCTOR:
@@ -540,14 +717,18 @@ def bsdf_pdf(bp, wo, wi):
             _kd(prm), _ks(prm), _alpha(prm), wo, wi
         )
         return pdf
+    if t == METAL:
+        _, pdf = _metal_eval_pdf(prm, wo, wi)
+        return pdf
     return 0.0
 
 
 @jit
 def bsdf_is_delta(bp):
-    """True for materials that only scatter into discrete directions (MIRROR, DIELECTRIC)."""
+    """True for materials that only scatter into discrete directions (MIRROR, DIELECTRIC,
+    THIN_DIELECTRIC, METAL with alpha 0)."""
     t, prm = bp
-    return t == MIRROR or t == DIELECTRIC
+    return t == MIRROR or t == DIELECTRIC or t == THIN_DIELECTRIC or (t == METAL and prm[6] <= 0.0)
 
 
 @jit
@@ -559,6 +740,8 @@ def bsdf_roughness(bp):
     if t == DIFFUSE:
         return math.inf
     if t == CONDUCTOR or t == ROUGH_DIELECTRIC or t == PLASTIC:
+        return _alpha(prm)
+    if t == METAL and prm[6] > 0.0:
         return _alpha(prm)
     return 0.0
 
@@ -572,10 +755,21 @@ def delta_lobe(bp, wo, transmit, radiance):
     t, prm = bp
     if wo[2] == 0.0:
         return _ZERO3, _ZERO3, 0.0
+    if prm[14] != 0.0 and int(prm[14]) & ONE_SIDED and wo[2] < 0.0:
+        return _ZERO3, _ZERO3, 0.0
     if t == MIRROR:
         if transmit:
             return _ZERO3, _ZERO3, 0.0
         return (-wo[0], -wo[1], wo[2]), _ks(prm), 1.0
+    if t == METAL and prm[6] <= 0.0:
+        if transmit:
+            return _ZERO3, _ZERO3, 0.0
+        return (-wo[0], -wo[1], wo[2]), _metal_f(prm, abs(wo[2])), 1.0
+    if t == THIN_DIELECTRIC:
+        r = _thin_reflectance(prm, wo)
+        if transmit:
+            return (-wo[0], -wo[1], -wo[2]), (1.0 - r, 1.0 - r, 1.0 - r), 1.0 - r
+        return (-wo[0], -wo[1], wo[2]), (r, r, r), r
     if t != DIELECTRIC or not prm[7] > 0.0:
         return _ZERO3, _ZERO3, 0.0
     ior = prm[7]
@@ -592,7 +786,8 @@ def delta_lobe(bp, wo, transmit, radiance):
 
 @jit
 def bsdf_albedo(bp):
-    """A cheap albedo 3-tuple for the AOV: kd; ks (metals); min(kd + ks, 1) (plastic); 1 (glass)."""
+    """A cheap albedo 3-tuple for the AOV: kd; ks (metals; METAL: ks x its normal-incidence Fresnel);
+    min(kd + ks, 1) (plastic); 1 (glass)."""
     t, prm = bp
     if t == DIFFUSE:
         return _kd(prm)
@@ -604,7 +799,9 @@ def bsdf_albedo(bp):
             min(prm[1] + prm[4], 1.0),
             min(prm[2] + prm[5], 1.0),
         )
-    if t == DIELECTRIC or t == ROUGH_DIELECTRIC:
+    if t == METAL:
+        return _metal_f(prm, 1.0)
+    if t == DIELECTRIC or t == ROUGH_DIELECTRIC or t == THIN_DIELECTRIC:
         return (1.0, 1.0, 1.0)
     return _ZERO3
 

@@ -51,7 +51,7 @@ class Surfaces(NamedTuple):
     material: np.ndarray  # (F,) material index of each triangle
     eps: np.ndarray  # (F,) float64 ray offset of each triangle (tracer.bvh.ray_offsets)
     mat_type: np.ndarray  # (M,) int32 material type (tracer.bsdfs)
-    mat_param: np.ndarray  # (M, 8) float64 material parameters
+    mat_param: np.ndarray  # (M, bsdfs.N_PARAM) float64 material parameters
     uv: np.ndarray  # (F, 3, 2) float64 corner UVs, or (0, 3, 2): none in the scene
     vn: np.ndarray  # (F, 3, 3) float64 corner normals (a zero row: flat), or (0, 3, 3): none
     mat_tex: np.ndarray  # (M, N_TEX_SLOTS) int32 texture of each slot (-1: none)
@@ -153,7 +153,7 @@ def surface_at(surf, p, b1, b2):
     bp = bsdf_row(surf.mat_type, surf.mat_param, m)
     ng = (surf.normal[p, 0], surf.normal[p, 1], surf.normal[p, 2])
     uv = (0.0, 0.0)
-    if surf.mat_tex.shape[0] > 0 and (surf.mat_tex[m, TEX_SLOT_KD] >= 0 or surf.mat_tex[m, TEX_SLOT_KS] >= 0):
+    if surf.tex_info.shape[0] > 0 and (surf.mat_tex[m, TEX_SLOT_KD] >= 0 or surf.mat_tex[m, TEX_SLOT_KS] >= 0):
         uv = surface_uv(surf, p, b1, b2)
         t, prm = bp
         kd = (prm[0], prm[1], prm[2])
@@ -162,7 +162,8 @@ def surface_at(surf, p, b1, b2):
             kd = texture_eval(surf.tex_info, surf.tex_data, surf.mat_tex[m, TEX_SLOT_KD], uv[0], uv[1])
         if surf.mat_tex[m, TEX_SLOT_KS] >= 0:
             ks = texture_eval(surf.tex_info, surf.tex_data, surf.mat_tex[m, TEX_SLOT_KS], uv[0], uv[1])
-        bp = (t, (kd[0], kd[1], kd[2], ks[0], ks[1], ks[2], prm[6], prm[7]))
+        bp = (t, (kd[0], kd[1], kd[2], ks[0], ks[1], ks[2], prm[6], prm[7], prm[8], prm[9], prm[10], prm[11],
+                  prm[12], prm[13], prm[14], prm[15]))
     ns = shading_normal(surf, p, b1, b2, ng)
     s, tt = frame(ns)
     return Surface(bp, ns, s, tt, uv, surf.vn.shape[0] > 0)
@@ -188,7 +189,7 @@ def barycentrics(tri, p, x):
 @jit(inline="always")
 def surface_at_point(surf, p, x):
     """surface_at for a point x known by position only (the gradient-domain offsets)."""
-    if surf.vn.shape[0] == 0 and surf.mat_tex.shape[0] == 0:
+    if surf.vn.shape[0] == 0 and surf.tex_info.shape[0] == 0:
         return surface_at(surf, p, 0.0, 0.0)
     b1, b2 = barycentrics(surf.tri, p, x)
     return surface_at(surf, p, b1, b2)

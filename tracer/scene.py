@@ -32,7 +32,7 @@ class Materials:
 
     names: list
     type: np.ndarray  # (M,) int32, bsdfs.DIFFUSE ...
-    param: np.ndarray  # (M, 8) float64: kd rgb, ks rgb, alpha, ior
+    param: np.ndarray  # (M, bsdfs.N_PARAM) float64: kd rgb, ks rgb, alpha, ior, eta rgb, k rgb, flags
     emission: np.ndarray  # (M, 3) float64 radiance, one-sided
     tex: np.ndarray = None  # (M, N_TEX_SLOTS) int32 texture of each slot (kd, ks; -1: none), tracer.material
 
@@ -140,7 +140,8 @@ class SceneSpec:
     tri           (F, 3, 3) float64 world vertices; tri_material (F,) int32 index into materials
     uv, normals   (F, 3, 2) corner UVs and (F, 3, 3) corner normals (a zero row: a flat
                   triangle), or None
-    materials     [(name, type (tracer.bsdfs), param (8,) float64, emission (3,) float64[, tex])],
+    materials     [(name, type (tracer.bsdfs), param (8,) or (N_PARAM,) float64 (zeros past the
+                  eighth), emission (3,) float64[, tex])],
                   tex the index into `textures` of each texture slot (kd, ks; -1 none)
     textures      [tracer.textures.TextureSpec]
     no_light      what a scene without light lacks, in the reader's terms (the error's text)
@@ -221,6 +222,14 @@ def load_scene(path, before_framing=None, **overrides):
     return build_scene(spec, before_framing)
 
 
+def _padded(param):
+    """A material's parameters as the table's N_PARAM columns (zeros past those given)."""
+    out = np.zeros(bsdfs.N_PARAM)
+    p = np.asarray(param, dtype=np.float64).reshape(-1)
+    out[: p.size] = p
+    return out
+
+
 def build_scene(spec, before_framing=None):
     """The Scene of a SceneSpec: the materials table, degenerate triangles skipped (reported at
     INFO), the camera (framed when the spec gives none: before_framing() is called first), and a
@@ -228,7 +237,7 @@ def build_scene(spec, before_framing=None):
     materials = Materials(
         [m[0] for m in spec.materials],
         np.asarray([m[1] for m in spec.materials], dtype=np.int32),
-        np.asarray([m[2] for m in spec.materials], dtype=np.float64).reshape(-1, 8),
+        np.asarray([_padded(m[2]) for m in spec.materials], dtype=np.float64).reshape(-1, bsdfs.N_PARAM),
         np.asarray([m[3] for m in spec.materials], dtype=np.float64).reshape(-1, 3),
         np.asarray([m[4] if len(m) > 4 else (-1,) * N_TEX_SLOTS for m in spec.materials],
                    dtype=np.int32).reshape(-1, N_TEX_SLOTS),

@@ -149,7 +149,8 @@ def test_a_delta_lobe_shifts_only_to_a_delta_lobe():
     assert not half_vector_shift(_bp(4), _bp(4), wo_b, tuple(wi_b), _unit([0.9, 0.0, -0.3]), True)[0]
 
 
-@pytest.mark.parametrize("name,roughness", [("ajar", 0.001), ("caustic", 0.001), ("cornell", math.inf)])
+@pytest.mark.parametrize("name,roughness", [("ajar", 0.001), ("caustic", 0.001), ("cornell", math.inf),
+                                            ("ajar-textured", 0.001)])
 def test_hybrid_gradients_are_unbiased(name, roughness):
     """dx, dy of the hybrid shift at 2048 spp against a 16384-spp path render (16x16): sum of z^2
     below the chi-square 1% quantile, mean z within its bound (Sidak over 4 tests).
@@ -159,7 +160,9 @@ def test_hybrid_gradients_are_unbiased(name, roughness):
       reconnection check.
     - `cornell` with no vertex rough enough to reconnect: half-vector copies everywhere, so the pairs
       take no NEE and weigh emission over the BSDF techniques alone (NEE reconnecting while the
-      BSDF sample is copied would pair a path with two different partners)."""
+      BSDF sample is copied would pair a path with two different partners).
+    - `ajar-textured` (tests/scenes.textured): offsets evaluate the textured BSDF and the shading
+      frame at their own points (material.surface_at_point), with the light-leak mask."""
     for key, z in gradient_z(name, 16, 2048, 16384, shift="hybrid", shift_roughness=roughness):
         m = z.size
         assert m > 150

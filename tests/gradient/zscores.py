@@ -4,17 +4,19 @@ import os
 import numpy as np
 
 import tracer
+from tests import scenes
 from tracer.testing.stats import assert_clean
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def gradient_z(name, size, spp, ref_spp, **kw):
-    """[(key, z)] for dx and dy of a size x size render of built-in scene `name` (spp, seed 11,
+    """[(key, z)] for dx and dy of a size x size render of built-in scene `name` (tests.scenes.builtin:
+    `NAME-textured` too; spp, seed 11,
     max_depth 5, render kwargs kw): per-pixel z-scores, where no emitter is seen directly from
     either pixel, of the gradient against the difference of the two pixels of a path render
     (ref_spp, seed 12), with the variances of both."""
-    scene = tracer.load_scene(os.path.join(ROOT, "scenes", name, f"{name}.obj"), width=size, height=size)
+    scene = scenes.builtin(ROOT, name, size, size)
     g = tracer.render(scene, spp=spp, integrator="gpt", recon="none", seed=11, max_depth=5, **kw)
     p = tracer.render(scene, spp=ref_spp, seed=12, max_depth=5)
     assert_clean(g)

@@ -3,7 +3,9 @@
 Unbiasedness: the image mean (per channel) of a guided render equals the `bsdf` render's mean
 within a two-sided z-test whose variance is the sum of both means' variances (each estimated from
 the per-pixel variances of the mean; pixels are independent). Sidak-corrected over every
-scene x guide x channel.
+scene x guide x channel. `ajar-textured` is ajar with a checkerboard on its diffuse walls and
+tilted shading normals (tests/scenes.textured): the material step, the light-leak mask and the
+photons' adjoint factor all act there.
 """
 import os
 
@@ -30,12 +32,12 @@ VARIANTS = [(g, {}) for g in GUIDES] + [("photon", {"mixing": "eq14"}), ("photon
                                         ("photon", {"split": 1.5, "window": 0.0}),
                                         ("photon", {"window": 1.0, "window_low": 0.5}),
                                         ("photon", {"reconstruct": "cnn"})]
-CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96)]
+CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96), ("ajar-textured", 48, 36, 96)]
 N_TESTS = len(CASES) * len(VARIANTS) * 3
 
 
 def _scene(name, w, h):
-    return tracer.load_scene(os.path.join(ROOT, "scenes", name, f"{name}.obj"), width=w, height=h)
+    return scenes.builtin(ROOT, name, w, h)
 
 
 @pytest.fixture(scope="module")

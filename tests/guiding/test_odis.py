@@ -215,11 +215,11 @@ def test_pixel_maps_match_a_slow_twin(w, h, stride):
         np.testing.assert_array_equal(a, b)
 
 
-CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96)]
+CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96), ("ajar-textured", 48, 36, 96)]  # (tests/scenes.textured)
 
 
 def _scene(name, w, h):
-    return tracer.load_scene(os.path.join(ROOT, "scenes", name, f"{name}.obj"), width=w, height=h)
+    return scenes.builtin(ROOT, name, w, h)
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])

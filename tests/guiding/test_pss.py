@@ -161,7 +161,7 @@ def test_trained_toy_flow_samples_follow_its_density():
 
 
 def _scene(name, w, h):
-    return tracer.load_scene(os.path.join(ROOT, "scenes", name, f"{name}.obj"), width=w, height=h)
+    return scenes.builtin(ROOT, name, w, h)
 
 
 @pytest.mark.parametrize("pixel_filter", ["box", "point"])
@@ -184,7 +184,7 @@ def test_candidate_primary_samples_replay_the_candidate_pass(pixel_filter):
     assert (same & (f > 0)).sum() > 0.95 * np.count_nonzero(f)
 
 
-CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96)]
+CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96), ("ajar-textured", 48, 36, 96)]  # (tests/scenes.textured)
 MODES = ["image", "pixel"]
 FAST = dict(m=1, layers=2, width=16, epochs=6, candidates=16)
 

@@ -28,7 +28,7 @@ SIDECAR_KEYS = {
     "materials": None,  # keyed by material name
     "obj": None,  # only in a JSON scene file
 }
-MATERIAL_KEYS = {"type", "kd", "ks", "alpha", "ior", "emission"}
+MATERIAL_KEYS = {"type", "kd", "ks", "alpha", "ior", "emission", "metal", "eta", "k", "one_sided"}
 # Keyword overrides of load_scene and the sidecar section each one belongs to.
 OVERRIDES = {
     "width": "film",
@@ -107,7 +107,8 @@ def material_override(name, spec, base, where):
     check_keys(f"{where}: materials.{name}", spec, MATERIAL_KEYS)
     mtype, param, emission = base[:3]
     tex = list(base[3]) if len(base) > 3 else None
-    param = param.copy()
+    param = np.zeros(bsdfs.N_PARAM)
+    param[: len(base[1])] = base[1]
     emission = emission.copy()
     if "type" in spec:
         if spec["type"] not in bsdfs.TYPE_NAMES:
@@ -127,6 +128,19 @@ def material_override(name, spec, base, where):
         param[6] = number(f"{where}: materials.{name}.alpha", spec["alpha"], lo=0.0)
     if "ior" in spec:
         param[7] = number(f"{where}: materials.{name}.ior", spec["ior"], lo=1e-3)
+    if "metal" in spec:
+        from ..metals import METALS
+
+        if spec["metal"] not in METALS:
+            raise SceneError(f"{where}: materials.{name}.metal {spec['metal']!r} unknown; valid: {', '.join(METALS)}")
+        param[8:11], param[11:14] = METALS[spec["metal"]]
+    if "eta" in spec:
+        param[8:11] = vec3(f"{where}: materials.{name}.eta", spec["eta"])
+    if "k" in spec:
+        param[11:14] = vec3(f"{where}: materials.{name}.k", spec["k"])
+    if "one_sided" in spec:
+        flags = int(param[14]) & ~bsdfs.ONE_SIDED
+        param[14] = flags | (bsdfs.ONE_SIDED if spec["one_sided"] else 0)
     if "emission" in spec:
         emission = vec3(f"{where}: materials.{name}.emission", spec["emission"])
     if param[:6].min() < 0.0 or emission.min() < 0.0:
