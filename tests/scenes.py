@@ -99,6 +99,7 @@ def textured(scene):
     smoothly with position (shading normals: the light-leak mask and the photons' adjoint factor
     act)."""
     from tracer import bsdfs
+    from tracer.material import N_TEX_SLOTS
     from tracer.textures import TextureSpec, build_textures
 
     tri = scene.tri
@@ -112,7 +113,7 @@ def textured(scene):
     scene.tri_vn = np.ascontiguousarray(vn)
     scene.textures = build_textures([TextureSpec("checker", color0=(0.8, 0.35, 0.2), color1=(0.25, 0.6, 0.75),
                                                  uv=(4.0, 0.0, 0.0, 0.0, 4.0, 0.0))], [])
-    scene.materials.tex = np.full((len(scene.materials.names), 2), -1, np.int32)
+    scene.materials.tex = np.full((len(scene.materials.names), N_TEX_SLOTS), -1, np.int32)
     scene.materials.tex[scene.materials.type == bsdfs.DIFFUSE, 0] = 0
     return scene
 

@@ -187,7 +187,7 @@ def test_pbr_statements_mean_what_gltf_means():
         d = pathlib.Path(d)
         (t, p, e, tex), w, _ = _one_material(d, "Kd 1 0.77 0.34\nKs 0.5 0.5 0.5\nPm 1\nPr 0.2\nillum 3")
         assert t == bsdfs.CONDUCTOR and np.allclose(p[3:6], [1, 0.77, 0.34]) and np.isclose(p[6], 0.04)
-        assert tex == (-1, -1) and not w
+        assert tex == (-1, -1, -1) and not w
         (t, p, e, tex), w, _ = _one_material(d, "Kd 0 0 0\nKs 0.9 0.9 0.9\nPr 0.5\nPm 1\nillum 2")
         assert t == bsdfs.CONDUCTOR and np.allclose(p[3:6], 0.9) and np.isclose(p[6], 0.25)
         (t, p, e, tex), w, _ = _one_material(d, "Kd 0.2 0.4 0.6\nKs 0.5 0.5 0.5\nPr 0.3\nNi 1.5\nillum 2")
@@ -226,3 +226,67 @@ def test_sidecar_makes_a_named_metal(tmp_path):
     (tmp_path / "q.json").write_text(json.dumps(side))
     with pytest.raises(SceneError, match="Unobtainium.*valid: .*Au"):
         tracer.load_scene(obj)
+
+
+def _bilinear_grad(img, u, v):
+    """(d/du, d/dv) of the bilinear lookup of the grey image img (H, W) at (u, v), written out here:
+    the derivative within the texel cell, times the texels per unit of u (and minus those of v:
+    rows run down the image while v runs up)."""
+    h, w = img.shape
+    x = u * w - 0.5
+    y = (1.0 - v) * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    x0, y0 = x0.astype(int) % w, y0.astype(int) % h
+    x1, y1 = (x0 + 1) % w, (y0 + 1) % h
+    a, b, c, d = img[y0, x0], img[y0, x1], img[y1, x0], img[y1, x1]
+    return ((1 - fy) * (b - a) + fy * (d - c)) * w, -((1 - fx) * (c - a) + fx * (d - b)) * h
+
+
+def test_bump_map_tilts_the_normal_as_mitsubas_bumpmap(tmp_path):
+    """`bump -bm 0.05 h.png` on the quad: the normal AOV at each pixel centre is Mitsuba's bumpmap
+    normal, cross(dp/du + n (s h_u), dp/dv + n (s h_v)) normalised, with the height's gradient
+    (h_u, h_v) from the NumPy bilinear derivative of the sRGB-decoded image and dp/du = (2, 0, 0),
+    dp/dv = (0, 2, 0) for this quad. Detects a gradient off by the texel count, a flipped v, a
+    missing scale, or a bump that is not applied."""
+    rng = np.random.default_rng(4)
+    grey = rng.integers(0, 256, size=(8, 8), dtype=np.uint8)
+    obj = _textured_quad(tmp_path, "Kd 0.5 0.5 0.5\nbump -bm 0.05 h.png", np.zeros((2, 2, 3), np.uint8))
+    _write_png(tmp_path / "h.png", np.repeat(grey[:, :, None], 3, axis=2))
+    scene = tracer.load_scene(obj)
+    assert not [w for w in scene.warnings if "bump" in w]
+    r = tracer.render(scene, spp=1, max_depth=1, seed=0, pixel_filter="point")
+    uv = _pixel_uv(scene)
+    gu, gv = _bilinear_grad(_srgb_to_linear(grey / 255.0), uv[..., 0], uv[..., 1])
+    a = np.stack([np.full_like(gu, 2.0), np.zeros_like(gu), 0.05 * gu], axis=-1)
+    b = np.stack([np.zeros_like(gv), np.full_like(gv, 2.0), 0.05 * gv], axis=-1)
+    n = np.cross(a, b)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    assert np.degrees(np.arccos(np.clip(n[..., 2], -1, 1))).max() > 5.0  # the bump tilts it noticeably
+    np.testing.assert_allclose(r.aovs["normal"], n, atol=2e-5)
+
+
+def test_bump_map_without_uvs_is_a_warning(tmp_path):
+    """A bump map on faces without vt: one warning naming the OBJ and the material; the scene
+    renders flat."""
+    (tmp_path / "q.obj").write_text("mtllib q.mtl\nusemtl b\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nf 1 2 3\n")
+    (tmp_path / "q.mtl").write_text("newmtl b\nKd 0.5 0.5 0.5\nbump h.png\n")
+    _write_png(tmp_path / "h.png", np.zeros((2, 2, 3), np.uint8))
+    (tmp_path / "q.json").write_text(json.dumps({"environment": {"radiance": [1, 1, 1]}}))
+    scene = tracer.load_scene(str(tmp_path / "q.obj"))
+    msgs = [w for w in scene.warnings if "bump" in w]
+    assert len(msgs) == 1 and "q.obj" in msgs[0] and "'b'" in msgs[0]
+
+
+def test_a_see_through_material_names_the_sidecar_fix():
+    """`d 0.4` on an illum 2 material (how exporters write glass they cannot describe): one warning
+    that it renders opaque, naming materials.NAME.type; `d 1` (every Blender material) says nothing."""
+    import pathlib
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        d = pathlib.Path(d)
+        (t, _, _, _), w, _ = _one_material(d, "Kd 0.8 0.8 0.8\nNi 1.45\nd 0.4\nillum 2")
+        assert t == bsdfs.DIFFUSE and len(w) == 1 and 'materials.m.type to "dielectric"' in w[0] and "d 0.4" in w[0]
+        (t, _, _, _), w, _ = _one_material(d, "Kd 0.8 0.8 0.8\nNi 1.45\nd 1.0\nillum 2")
+        assert not w

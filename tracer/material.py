@@ -25,8 +25,12 @@ fractional parts of u and v are both above or both below 1/2, colour 1 elsewhere
 first mapped by the affine (u', v') = (a u + b v + c, d u + e v + f). UVs follow the OBJ
 convention: v grows upward in the image, so texel row = (1 - v') height.
 
-`mat_tex[m]` names the texture of each slot of material m (TEX_SLOT_KD, TEX_SLOT_KS, -1: none): a
-slot's texture replaces the matching params (kd or ks).
+`mat_tex[m]` names the texture of each slot of material m (TEX_SLOT_KD, TEX_SLOT_KS,
+TEX_SLOT_BUMP; -1: none): a kd or ks texture replaces the matching params; a bump texture is a
+height field h(u, v) (its Rec. 709 luminance) that tilts the shading normal as Mitsuba 3's
+`bumpmap` does: with g = params[P_BUMP_SCALE] x grad h, the surface's dp/du and dp/dv get g_u,
+g_v as their components along the normal, and the new normal is their cross product, turned into
+ng's hemisphere (`bump_normal`). A triangle without usable UVs keeps its normal.
 """
 import math
 from typing import NamedTuple
@@ -38,8 +42,9 @@ from .bsdfs import bsdf_row
 from .sampling import dot, frame
 
 TEX_CONSTANT, TEX_BITMAP, TEX_CHECKER = 0, 1, 2
-TEX_SLOT_KD, TEX_SLOT_KS = 0, 1
-N_TEX_SLOTS = 2
+TEX_SLOT_KD, TEX_SLOT_KS, TEX_SLOT_BUMP = 0, 1, 2
+N_TEX_SLOTS = 3
+P_BUMP_SCALE = 15  # the params column of a bump-mapped material's height scale
 TEX_INFO_COLS = 16
 
 
@@ -67,7 +72,7 @@ class Surface(NamedTuple):
     s: tuple  # unit tangents: (s, t, ns) is the local frame
     t: tuple
     uv: tuple  # the point's (u, v) (0, 0 without UVs)
-    smooth: bool  # ns comes from vertex normals (else it is ng, and `crosses` is always False)
+    smooth: bool  # ns comes from vertex normals or a bump map (else it is ng: `crosses` is always False)
 
 
 @jit
@@ -115,6 +120,86 @@ def texture_eval(tex_info, tex_data, k, u, v):
 
 
 @jit
+def _lum(c):
+    return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+
+
+@jit
+def texture_grad(tex_info, tex_data, k, u, v):
+    """(d/du, d/dv) of texture k's scalar value (luminance) at (u, v): the exact derivative of the
+    bilinear bitmap in the cell holding the point; (0, 0) for constants and checkerboards."""
+    if int(tex_info[k, 0]) != TEX_BITMAP:
+        return 0.0, 0.0
+    uu = tex_info[k, 4] * u + tex_info[k, 5] * v + tex_info[k, 6]
+    vv = tex_info[k, 7] * u + tex_info[k, 8] * v + tex_info[k, 9]
+    base = int(tex_info[k, 1])
+    w = int(tex_info[k, 2])
+    h = int(tex_info[k, 3])
+    x = uu * w - 0.5
+    y = (1.0 - vv) * h - 0.5
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return 0.0, 0.0
+    x0 = math.floor(x)
+    y0 = math.floor(y)
+    fx = x - x0
+    fy = y - y0
+    ix = int(x0 % w)
+    iy = int(y0 % h)
+    a = _lum(_texel(tex_data, base, w, h, ix, iy))
+    b = _lum(_texel(tex_data, base, w, h, ix + 1, iy))
+    c = _lum(_texel(tex_data, base, w, h, ix, iy + 1))
+    d = _lum(_texel(tex_data, base, w, h, ix + 1, iy + 1))
+    dx = (1.0 - fy) * (b - a) + fy * (d - c)  # per texel along x (u) and y (down the image)
+    dy = (1.0 - fx) * (c - a) + fx * (d - b)
+    gu = dx * w  # d/du' and d/dv' (v' up the image)
+    gv = -dy * h
+    return gu * tex_info[k, 4] + gv * tex_info[k, 7], gu * tex_info[k, 5] + gv * tex_info[k, 8]
+
+
+@jit
+def triangle_dpduv(tri, uv, p):
+    """(dp/du, dp/dv, ok) of triangle p from its corners and corner UVs; ok False where its UVs
+    are degenerate."""
+    e1 = (tri[p, 1, 0] - tri[p, 0, 0], tri[p, 1, 1] - tri[p, 0, 1], tri[p, 1, 2] - tri[p, 0, 2])
+    e2 = (tri[p, 2, 0] - tri[p, 0, 0], tri[p, 2, 1] - tri[p, 0, 1], tri[p, 2, 2] - tri[p, 0, 2])
+    du1 = uv[p, 1, 0] - uv[p, 0, 0]
+    dv1 = uv[p, 1, 1] - uv[p, 0, 1]
+    du2 = uv[p, 2, 0] - uv[p, 0, 0]
+    dv2 = uv[p, 2, 1] - uv[p, 0, 1]
+    det = du1 * dv2 - dv1 * du2
+    if not (det != 0.0 and math.isfinite(det)):
+        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), False
+    inv = 1.0 / det
+    dpdu = ((dv2 * e1[0] - dv1 * e2[0]) * inv, (dv2 * e1[1] - dv1 * e2[1]) * inv, (dv2 * e1[2] - dv1 * e2[2]) * inv)
+    dpdv = ((du1 * e2[0] - du2 * e1[0]) * inv, (du1 * e2[1] - du2 * e1[1]) * inv, (du1 * e2[2] - du2 * e1[2]) * inv)
+    return dpdu, dpdv, True
+
+
+@jit
+def bump_normal(n, ng, dpdu, dpdv, gu, gv):
+    """The bump-mapped normal: dp/du, dp/dv with their components along n replaced by the height's
+    gradient (gu, gv), crossed and normalised, in ng's hemisphere; n where that degenerates."""
+    su = gu - dot(n, dpdu)
+    sv = gv - dot(n, dpdv)
+    a = (dpdu[0] + su * n[0], dpdu[1] + su * n[1], dpdu[2] + su * n[2])
+    b = (dpdv[0] + sv * n[0], dpdv[1] + sv * n[1], dpdv[2] + sv * n[2])
+    c = (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+    return _unit_toward(c, ng, n)
+
+
+@jit
+def _unit_toward(c, ng, fallback):
+    """c normalised and turned into ng's hemisphere; fallback where c vanishes or is not finite."""
+    c2 = dot(c, c)
+    if not (c2 > 0.0 and math.isfinite(c2)):
+        return fallback
+    inv = 1.0 / math.sqrt(c2)
+    if dot(c, ng) < 0.0:
+        inv = -inv
+    return (c[0] * inv, c[1] * inv, c[2] * inv)
+
+
+@jit
 def shading_normal(surf, p, b1, b2, ng):
     """Unit interpolated vertex normal of triangle p at (b1, b2), in ng's hemisphere; ng itself
     where the triangle has none (a zero corner) or the interpolation vanishes."""
@@ -125,13 +210,7 @@ def shading_normal(surf, p, b1, b2, ng):
     n = (b0 * vn[p, 0, 0] + b1 * vn[p, 1, 0] + b2 * vn[p, 2, 0],
          b0 * vn[p, 0, 1] + b1 * vn[p, 1, 1] + b2 * vn[p, 2, 1],
          b0 * vn[p, 0, 2] + b1 * vn[p, 1, 2] + b2 * vn[p, 2, 2])
-    n2 = dot(n, n)
-    if not (n2 > 0.0 and math.isfinite(n2)):
-        return ng
-    inv = 1.0 / math.sqrt(n2)
-    if dot(n, ng) < 0.0:
-        inv = -inv
-    return (n[0] * inv, n[1] * inv, n[2] * inv)
+    return _unit_toward(n, ng, ng)
 
 
 @jit
@@ -153,8 +232,11 @@ def surface_at(surf, p, b1, b2):
     bp = bsdf_row(surf.mat_type, surf.mat_param, m)
     ng = (surf.normal[p, 0], surf.normal[p, 1], surf.normal[p, 2])
     uv = (0.0, 0.0)
-    if surf.tex_info.shape[0] > 0 and (surf.mat_tex[m, TEX_SLOT_KD] >= 0 or surf.mat_tex[m, TEX_SLOT_KS] >= 0):
+    textured = surf.tex_info.shape[0] > 0 and (surf.mat_tex[m, TEX_SLOT_KD] >= 0 or surf.mat_tex[m, TEX_SLOT_KS] >= 0
+                                              or surf.mat_tex[m, TEX_SLOT_BUMP] >= 0)
+    if textured:
         uv = surface_uv(surf, p, b1, b2)
+    if textured and (surf.mat_tex[m, TEX_SLOT_KD] >= 0 or surf.mat_tex[m, TEX_SLOT_KS] >= 0):
         t, prm = bp
         kd = (prm[0], prm[1], prm[2])
         ks = (prm[3], prm[4], prm[5])
@@ -165,8 +247,16 @@ def surface_at(surf, p, b1, b2):
         bp = (t, (kd[0], kd[1], kd[2], ks[0], ks[1], ks[2], prm[6], prm[7], prm[8], prm[9], prm[10], prm[11],
                   prm[12], prm[13], prm[14], prm[15]))
     ns = shading_normal(surf, p, b1, b2, ng)
+    smooth = surf.vn.shape[0] > 0
+    if textured and surf.mat_tex[m, TEX_SLOT_BUMP] >= 0 and surf.uv.shape[0] > 0:
+        dpdu, dpdv, ok = triangle_dpduv(surf.tri, surf.uv, p)
+        if ok:
+            gu, gv = texture_grad(surf.tex_info, surf.tex_data, surf.mat_tex[m, TEX_SLOT_BUMP], uv[0], uv[1])
+            k = surf.mat_param[m, P_BUMP_SCALE] if surf.mat_param.shape[1] > P_BUMP_SCALE else 1.0
+            ns = bump_normal(ns, ng, dpdu, dpdv, k * gu, k * gv)
+            smooth = True
     s, tt = frame(ns)
-    return Surface(bp, ns, s, tt, uv, surf.vn.shape[0] > 0)
+    return Surface(bp, ns, s, tt, uv, smooth)
 
 
 @jit

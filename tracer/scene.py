@@ -3,7 +3,7 @@
 Loading is reader -> spec -> build. `load_scene(path, **overrides)` picks the reader by the
 file's extension: `name.obj` (with `name.json` beside it if present) or a JSON scene file that
 names its OBJ under the key "obj" (tracer.readers.obj: the OBJ and its MTL; readers.sidecar: the
-JSON). A reader fills a SceneSpec: triangles, their materials as (name, type, param, emission),
+JSON), or a Mitsuba scene `.xml` (tracer.readers.mitsuba, a subset for now). A reader fills a SceneSpec: triangles, their materials as (name, type, param, emission),
 film size, render settings, a CameraSpec, the environment, warnings. `build_scene(spec)` owns
 what every reader shares: the materials table, degenerate triangles (counted, reported,
 skipped), the camera (look-at, a camera-to-world matrix, or framed by tracer.framing when the
@@ -34,7 +34,7 @@ class Materials:
     type: np.ndarray  # (M,) int32, bsdfs.DIFFUSE ...
     param: np.ndarray  # (M, bsdfs.N_PARAM) float64: kd rgb, ks rgb, alpha, ior, eta rgb, k rgb, flags
     emission: np.ndarray  # (M, 3) float64 radiance, one-sided
-    tex: np.ndarray = None  # (M, N_TEX_SLOTS) int32 texture of each slot (kd, ks; -1: none), tracer.material
+    tex: np.ndarray = None  # (M, N_TEX_SLOTS) int32 texture of each slot (kd, ks, bump; -1: none), tracer.material
 
     def __repr__(self):
         kinds = [bsdfs.TYPE_NAMES[t] for t in self.type]
@@ -142,7 +142,7 @@ class SceneSpec:
                   triangle), or None
     materials     [(name, type (tracer.bsdfs), param (8,) or (N_PARAM,) float64 (zeros past the
                   eighth), emission (3,) float64[, tex])],
-                  tex the index into `textures` of each texture slot (kd, ks; -1 none)
+                  tex the index into `textures` of each texture slot (kd, ks, bump; -1 none)
     textures      [tracer.textures.TextureSpec]
     no_light      what a scene without light lacks, in the reader's terms (the error's text)
     """
@@ -180,6 +180,8 @@ def load_scene(path, before_framing=None, **overrides):
         raise SettingsError(f"unknown scene override {bad[0]!r}; valid: {', '.join(sorted(OVERRIDES))}")
     warnings = []
     ext = os.path.splitext(path)[1].lower()
+    if ext == ".xml":
+        return _load_mitsuba(path, before_framing, overrides)
     if ext == ".json":
         sidecar_path = path
         sidecar = read_sidecar(path)
@@ -228,6 +230,23 @@ def _padded(param):
     p = np.asarray(param, dtype=np.float64).reshape(-1)
     out[: p.size] = p
     return out
+
+
+def _load_mitsuba(path, before_framing, overrides):
+    """load_scene for a Mitsuba scene XML (tracer.readers.mitsuba), with the keyword overrides."""
+    from .readers.mitsuba import read_mitsuba_scene
+
+    if not os.path.exists(path):
+        raise SceneError(f"{path}: scene file not found")
+    spec = read_mitsuba_scene(path)
+    for key, value in overrides.items():
+        if key in ("width", "height"):
+            setattr(spec, key, int(value))
+        elif key == "fov":
+            spec.camera.fov = float(value)
+        else:
+            setattr(spec.render, key, int(value))
+    return build_scene(spec, before_framing)
 
 
 def build_scene(spec, before_framing=None):

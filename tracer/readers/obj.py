@@ -17,13 +17,14 @@ import numpy as np
 
 from .. import bsdfs
 from ..errors import SceneError
-from ..material import N_TEX_SLOTS, TEX_SLOT_KD, TEX_SLOT_KS
+from ..material import N_TEX_SLOTS, P_BUMP_SCALE, TEX_SLOT_BUMP, TEX_SLOT_KD, TEX_SLOT_KS
 from ..textures import TextureSpec
 from ..objread import ObjMesh, assemble, read_obj
 from .text import check_text, read_bytes, read_text, warn
 
-_MTL_USED = {"newmtl", "Kd", "Ks", "Ke", "Ns", "Ni", "illum", "Pr", "Pm"}
-_MTL_MAPS = {"map_Kd": TEX_SLOT_KD, "map_Ks": TEX_SLOT_KS}  # the texture maps the tracer reads
+_MTL_USED = {"newmtl", "Kd", "Ks", "Ke", "Ns", "Ni", "illum", "Pr", "Pm", "d", "Tr", "Tf"}
+# the texture maps the tracer reads, and their slots (tracer.material)
+_MTL_MAPS = {"map_Kd": TEX_SLOT_KD, "map_Ks": TEX_SLOT_KS, "bump": TEX_SLOT_BUMP, "map_bump": TEX_SLOT_BUMP}
 # options of a map statement and how many numbers each takes at most
 _MAP_OPTIONS = {"-blendu": 1, "-blendv": 1, "-bm": 1, "-boost": 1, "-cc": 1, "-clamp": 1, "-imfchan": 1, "-mm": 2,
                 "-o": 3, "-s": 3, "-t": 3, "-texres": 1, "-type": 1}
@@ -120,10 +121,11 @@ def scan_obj(path):
 
 
 def parse_map(path, lineno, args):
-    """(file path, uv affine (a, b, c, d, e, f)) of a map statement's arguments: its options
-    (`-s` scale and `-o` offset honoured: u' = s_u u + o_u, v' = s_v v + o_v; the others skipped)
-    and the file name, relative to the MTL's folder."""
-    scale, offset = [1.0, 1.0], [0.0, 0.0]
+    """(file path, uv affine (a, b, c, d, e, f), bump multiplier) of a map statement's arguments:
+    its options (`-s` scale and `-o` offset honoured: u' = s_u u + o_u, v' = s_v v + o_v; `-bm`
+    the bump multiplier, 1 by default; the others skipped) and the file name, relative to the
+    MTL's folder."""
+    scale, offset, bm = [1.0, 1.0], [0.0, 0.0], 1.0
     k = 0
     while k < len(args) and args[k] in _MAP_OPTIONS:
         opt = args[k]
@@ -142,14 +144,16 @@ def parse_map(path, lineno, args):
             scale = [float(vals[0]), float(vals[1]) if len(vals) > 1 else 1.0]
         elif opt == "-o" and vals:
             offset = [float(vals[0]), float(vals[1]) if len(vals) > 1 else 0.0]
+        elif opt == "-bm" and vals and not isinstance(vals[0], str):
+            bm = float(vals[0])
     name = " ".join(args[k:])
     if not name:
         raise SceneError(f"{path}:{lineno}: map statement without a file name")
-    return os.path.join(os.path.dirname(path), name), (scale[0], 0.0, offset[0], 0.0, scale[1], offset[1])
+    return os.path.join(os.path.dirname(path), name), (scale[0], 0.0, offset[0], 0.0, scale[1], offset[1]), bm
 
 
 def parse_mtl(path, warnings):
-    """Read an MTL file into {name: {statement: [floats], map_Kd / map_Ks: (file, uv, "mtl:line")}};
+    """Read an MTL file into {name: {statement: [floats], map: (file, uv, bump multiplier, "mtl:line")}};
     report what is ignored."""
     mats = {}
     ignored = {}
@@ -168,12 +172,13 @@ def parse_mtl(path, warnings):
         if cur is None:
             raise SceneError(f"{path}:{lineno}: {key!r} before any newmtl")
         if key in _MTL_MAPS:
-            file, uv = parse_map(path, lineno, args)
-            mats[cur][key] = (file, uv, f"{path}:{lineno}")
+            mats[cur][key] = (*parse_map(path, lineno, args), f"{path}:{lineno}")
             continue
-        if key.startswith("map_") or key in ("bump", "disp", "decal", "refl", "norm"):
-            what = "bump maps" if key in ("bump", "map_bump", "norm") else "this map"
-            ignored.setdefault(f"{key} ({what} not supported yet; ignored)", set()).add(cur)
+        if key.startswith("map_") or key in ("disp", "decal", "refl", "norm"):
+            ignored.setdefault(f"{key} (this map is not supported yet; ignored)", set()).add(cur)
+            continue
+        if key in ("d", "Tf") and args and args[0] in ("-halo", "xyz", "spectral"):
+            ignored.setdefault(f"{key} {args[0]}", set()).add(cur)  # forms the tracer does not read
             continue
         if key not in _MTL_USED:
             ignored.setdefault(key, set()).add(cur)
@@ -184,7 +189,7 @@ def parse_mtl(path, warnings):
             raise SceneError(f"{path}:{lineno}: malformed {key} line {line.strip()!r}") from None
         if not vals or not all(math.isfinite(v) for v in vals):
             raise SceneError(f"{path}:{lineno}: malformed {key} line {line.strip()!r}")
-        if key in ("Kd", "Ks", "Ke"):
+        if key in ("Kd", "Ks", "Ke", "Tf"):
             if len(vals) == 1:
                 vals = vals * 3
             if len(vals) != 3 or min(vals) < 0.0:
@@ -196,7 +201,7 @@ def parse_mtl(path, warnings):
 
 
 def material_from_mtl(name, st, where, warnings, textures=None):
-    """(type, param (8,), emission (3,), tex (N_TEX_SLOTS,)) for one MTL material's statements;
+    """(type, param (N_PARAM,), emission (3,), tex (N_TEX_SLOTS,)) for one MTL material's statements;
     its maps are appended to `textures` (TextureSpecs) and tex holds their indices (-1: none).
 
     The PBR extension (`Pm`, `Pr`, as Blender and other exporters write it) is read the way glTF's
@@ -246,22 +251,34 @@ def material_from_mtl(name, st, where, warnings, textures=None):
         mtype = bsdfs.DIFFUSE
     if pr is not None and pr > 0 and mtype in (bsdfs.MIRROR, bsdfs.DIELECTRIC):
         warn(warnings, f"{where}: material {name!r}: Pr is ignored by its illum {illum}")
+    dissolve = st.get("d", [1.0])[0]
+    tr = st.get("Tr", [0.0])[0]
+    tf = st.get("Tf", [0.0])
+    see_through = dissolve < 1.0 or tr > 0.0 or ("Tf" in st and max(tf) > 0.0 and tf != [1.0, 1.0, 1.0])
+    if see_through and mtype not in (bsdfs.DIELECTRIC, bsdfs.ROUGH_DIELECTRIC):
+        said = " ".join(f"{k} {' '.join(f'{v:g}' for v in st[k])}" for k in ("d", "Tr", "Tf") if k in st)
+        warn(warnings, f"{where}: material {name!r} is partly transparent ({said}) but renders opaque "
+                       f"(illum {illum}; opacity is not supported yet); if it is glass, set "
+                       f"materials.{name}.type to \"dielectric\" (and ior) in the sidecar")
     if np.any(kd > 1.0) and mtype in (bsdfs.DIFFUSE, bsdfs.PLASTIC):
         warn(warnings, f"{where}: material {name!r} has Kd > 1 (reflects more than it receives)")
-    param = np.array([*kd, *ks, alpha, ior], dtype=np.float64)
+    param = np.zeros(bsdfs.N_PARAM)
+    param[:8] = [*kd, *ks, alpha, ior]
     tex = [-1] * N_TEX_SLOTS
     for key, slot in _MTL_MAPS.items():
-        if key not in st or textures is None:
+        if key not in st or textures is None or tex[slot] >= 0:
             continue
-        file, uv, line = st[key]
+        file, uv, bm, line = st[key]
         if mtype == bsdfs.CONDUCTOR and key == "map_Kd" and slot == TEX_SLOT_KD:
             slot = TEX_SLOT_KS  # a metal's base colour is its F0
-        if mtype in (bsdfs.DIELECTRIC, bsdfs.ROUGH_DIELECTRIC):
+        if mtype in (bsdfs.DIELECTRIC, bsdfs.ROUGH_DIELECTRIC) and slot != TEX_SLOT_BUMP:
             warn(warnings, f"{where}: material {name!r} is a dielectric: its {key} is ignored")
             continue
-        base = param[3 * slot: 3 * slot + 3]
-        textures.append(TextureSpec("bitmap", file, uv=uv, fallback=tuple(base), where=f"{line} ({name!r}, {key})"))
+        base = (0.0, 0.0, 0.0) if slot == TEX_SLOT_BUMP else tuple(param[3 * slot: 3 * slot + 3])
+        textures.append(TextureSpec("bitmap", file, uv=uv, fallback=base, where=f"{line} ({name!r}, {key})"))
         tex[slot] = len(textures) - 1
+        if slot == TEX_SLOT_BUMP:
+            param[P_BUMP_SCALE] = bm
     return mtype, param, ke.astype(np.float64), tuple(tex)
 
 
@@ -399,9 +416,13 @@ def read_obj_scene(obj_path, warnings):
         start += count
     undefined = [n for n in usemtl if n in undefined]  # in the order the OBJ uses them
     if textures and mesh.uv is None:
-        named = [materials[k][0] for k in np.unique(tri_material)
-                 if len(materials[k]) > 4 and max(materials[k][4]) >= 0]
+        used = [materials[k] for k in np.unique(tri_material) if len(materials[k]) > 4]
+        named = [m[0] for m in used if max(m[4][:TEX_SLOT_BUMP]) >= 0]
+        bumped = [m[0] for m in used if m[4][TEX_SLOT_BUMP] >= 0]
         if named:
             warn(warnings, f"{obj_path}: the faces have no texture coordinates (vt): the textures of "
                            f"{', '.join(repr(n) for n in named[:3])} are read at uv (0, 0)")
+        if bumped:
+            warn(warnings, f"{obj_path}: the faces have no texture coordinates (vt): the bump maps of "
+                           f"{', '.join(repr(n) for n in bumped[:3])} are ignored")
     return ObjGeometry(tri, tri_material, materials, undefined, list(mtllibs), mesh.uv, mesh.normals, textures)

@@ -1,0 +1,433 @@
+"""Mitsuba scene XML (the dialects of Mitsuba 3 and, by its camelCase names, 0.6) as a SceneSpec.
+
+The subset the field's scenes use most, for now: `<default>` and `$name`; `<bsdf>` by id and
+`<ref>`, nested in `twosided` (Mitsuba's BSDFs are one-sided otherwise: the ONE_SIDED flag);
+`diffuse`, `conductor`/`roughconductor` (METAL: `eta`/`k`, a named `material`, GGX or Beckmann,
+`specular_reflectance`), `dielectric`, `roughdielectric` (GGX), `thindielectric`; textures
+`bitmap` and `checkerboard` with a `to_uv` scale/translate/matrix; shapes `obj` (with `to_world`,
+`face_normals`, `flip_normals`) and `rectangle`, an `area` emitter on a shape; the `perspective`
+sensor (`fov`, `fov_axis` x or y, `to_world` as a matrix or lookat), the film's size, the
+integrator's `max_depth` and the sampler's `sample_count`. Everything else is one warning naming
+the file and line (a shape or BSDF it cannot read is left out or replaced, as the warning says).
+
+UVs: the OBJ reader keeps OBJ's v (up the image); Mitsuba's textures read (u, 1 - v), so a
+texture's `to_uv` is composed with that flip here, and a rectangle's UVs are given in OBJ's
+convention.
+"""
+import os
+import re
+from xml.parsers import expat
+
+import numpy as np
+
+from .. import bsdfs
+from ..errors import SceneError
+from ..material import N_TEX_SLOTS, TEX_SLOT_KD, TEX_SLOT_KS
+from ..metals import METALS
+from ..scene import CameraSpec, RenderSettings, SceneSpec
+from ..textures import TextureSpec
+from .obj import read_geometry
+from .text import warn
+
+_CAMEL = {"toWorld": "to_world", "faceNormals": "face_normals", "flipNormals": "flip_normals", "maxDepth": "max_depth",
+          "sampleCount": "sample_count", "intIOR": "int_ior", "extIOR": "ext_ior", "fovAxis": "fov_axis",
+          "specularReflectance": "specular_reflectance", "diffuseReflectance": "diffuse_reflectance",
+          "toUV": "to_uv", "filterType": "filter_type"}
+
+
+class _Node:
+    """An XML element: tag, attributes (get), children (iteration), its line in the file."""
+
+    def __init__(self, tag, attrib, line):
+        self.tag, self.attrib, self.line, self.children = tag, attrib, line, []
+
+    def get(self, key, default=None):
+        return self.attrib.get(key, default)
+
+    def __iter__(self):
+        return iter(self.children)
+
+    def iter(self):
+        yield self
+        for c in self.children:
+            yield from c.iter()
+
+
+def _parse(path):
+    """The root _Node of an XML file; SceneError naming the file (and line) if it cannot be read."""
+    parser = expat.ParserCreate()
+    stack, roots = [], []
+
+    def start(tag, attrib):
+        node = _Node(tag, attrib, parser.CurrentLineNumber)
+        (stack[-1].children if stack else roots).append(node)
+        stack.append(node)
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = lambda tag: stack.pop()
+    try:
+        with open(path, "rb") as f:
+            parser.Parse(f.read(), True)
+    except OSError as e:
+        raise SceneError(f"{path}: cannot read ({e.strerror})") from None
+    except expat.ExpatError as e:
+        raise SceneError(f"{path}:{e.lineno}: not valid XML ({expat.ErrorString(e.code)})") from None
+    return roots[0]
+
+
+class _Reader:
+    def __init__(self, path, defines):
+        self.path = path
+        self.folder = os.path.dirname(os.path.abspath(path))
+        self.defaults = dict(defines or {})
+        self.defines = dict(defines or {})
+        self.warnings = []
+        self.ids = {}
+        self.textures = []
+        self.materials = []  # (name, type, param, emission, tex)
+        self.by_name = {}  # material name -> index (a BSDF shared by shapes is one material)
+        self.tris, self.mats, self.uvs, self.normals = [], [], [], []
+
+    # --- values ------------------------------------------------------------------------------
+    def where(self, el):
+        return f"{self.path}:{getattr(el, 'line', '?')}"
+
+    def warn(self, el, msg):
+        warn(self.warnings, f"{self.where(el)}: {msg}")
+
+    def attr(self, el, key, default=None):
+        v = el.get(key, default)
+        if isinstance(v, str) and "$" in v:
+            def sub(m):
+                name = m.group(1)
+                if name not in self.defaults:
+                    raise SceneError(f"{self.where(el)}: ${name} is not defined (no <default name=\"{name}\">)")
+                return self.defaults[name]
+            v = re.sub(r"\$([A-Za-z_][A-Za-z0-9_]*)", sub, v)
+        return v
+
+    def name(self, el):
+        n = self.attr(el, "name", "")
+        return _CAMEL.get(n, n)
+
+    def props(self, el):
+        """{name: element} of el's children that carry a name."""
+        return {self.name(c): c for c in el if c.get("name") is not None}
+
+    def number(self, el):
+        try:
+            return float(self.attr(el, "value"))
+        except (TypeError, ValueError):
+            raise SceneError(f"{self.where(el)}: {self.name(el)!r} needs a number, got {el.get('value')!r}") from None
+
+    def rgb(self, el):
+        if el.tag == "float":
+            return (self.number(el),) * 3
+        if el.tag in ("rgb", "spectrum", "color"):
+            vals = [float(x) for x in re.split(r"[,\s]+", self.attr(el, "value").strip()) if x]
+            if len(vals) == 1:
+                vals = vals * 3
+            if len(vals) != 3:
+                raise SceneError(f"{self.where(el)}: {self.name(el)!r} needs 1 or 3 numbers")
+            return tuple(vals)
+        raise SceneError(f"{self.where(el)}: {self.name(el)!r} must be a colour here, not <{el.tag}>")
+
+    def color_or_texture(self, el, default):
+        """(rgb constant, TextureSpec or None) of a reflectance property (None: the default)."""
+        if el is None:
+            return default, None
+        if el.tag == "ref":
+            found = self.ids.get(self.attr(el, "id"))
+            if found is None:
+                raise SceneError(f"{self.where(el)}: no texture with id {el.get('id')!r}")
+            el = found
+        if el.tag == "texture":
+            return default, self.texture(el)
+        return self.rgb(el), None
+
+    def matrix(self, el):
+        """The 4x4 of a <transform>: its children applied in order."""
+        m = np.eye(4)
+        for c in el:
+            if c.tag == "matrix":
+                vals = [float(x) for x in re.split(r"[,\s]+", self.attr(c, "value").strip()) if x]
+                if len(vals) == 16:
+                    t = np.array(vals).reshape(4, 4)
+                elif len(vals) == 9:
+                    t = np.eye(4)
+                    t[:3, :3] = np.array(vals).reshape(3, 3)
+                else:
+                    raise SceneError(f"{self.where(c)}: a matrix needs 9 or 16 numbers")
+            elif c.tag in ("translate", "scale"):
+                if "value" in c.attrib:
+                    v = [float(x) for x in re.split(r"[,\s]+", self.attr(c, "value").strip()) if x]
+                    v = v * 3 if len(v) == 1 else v
+                else:
+                    d = 0.0 if c.tag == "translate" else 1.0
+                    v = [float(self.attr(c, k, d)) for k in ("x", "y", "z")]
+                t = np.eye(4)
+                if c.tag == "translate":
+                    t[:3, 3] = v
+                else:
+                    t[0, 0], t[1, 1], t[2, 2] = v
+            elif c.tag == "rotate":
+                axis = np.array([float(self.attr(c, k, 0.0)) for k in ("x", "y", "z")])
+                ang = np.radians(float(self.attr(c, "angle", 0.0)))
+                n = np.linalg.norm(axis)
+                if n == 0:
+                    raise SceneError(f"{self.where(c)}: rotate needs a non-zero axis")
+                a = axis / n
+                k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+                t = np.eye(4)
+                t[:3, :3] = np.eye(3) + np.sin(ang) * k + (1 - np.cos(ang)) * k @ k
+            elif c.tag == "lookat":
+                o = np.array([float(x) for x in re.split(r"[,\s]+", self.attr(c, "origin").strip()) if x])
+                tg = np.array([float(x) for x in re.split(r"[,\s]+", self.attr(c, "target").strip()) if x])
+                up = np.array([float(x) for x in re.split(r"[,\s]+", self.attr(c, "up", "0 1 0").strip()) if x])
+                f = (tg - o) / np.linalg.norm(tg - o)
+                left = np.cross(up, f)
+                left /= np.linalg.norm(left)
+                t = np.eye(4)
+                t[:3, 0], t[:3, 1], t[:3, 2], t[:3, 3] = left, np.cross(f, left), f, o
+            else:
+                self.warn(c, f"transform <{c.tag}> is not supported; ignored")
+                continue
+            m = t @ m
+        return m
+
+    # --- textures and BSDFs ----------------------------------------------------------------------
+    def texture(self, el):
+        kind = self.attr(el, "type")
+        p = self.props(el)
+        uv = np.eye(3)
+        if "to_uv" in p:
+            t = self.matrix(p["to_uv"])
+            uv = np.array([[t[0, 0], t[0, 1], t[0, 3]], [t[1, 0], t[1, 1], t[1, 3]], [0, 0, 1]])
+        # Mitsuba reads the texture at (u, 1 - v) of our UVs
+        flip = np.array([[1.0, 0, 0], [0, -1.0, 1.0], [0, 0, 1]])
+        m = uv @ flip
+        if kind == "bitmap":
+            m = flip @ m  # our bitmap lookup flips v back (rows from the top at v' = 1)
+            file = self.attr(p["filename"], "value") if "filename" in p else ""
+            return TextureSpec("bitmap", os.path.join(self.folder, file), uv=tuple(m[:2].reshape(-1)),
+                               fallback=(0.5, 0.5, 0.5), where=self.where(el))
+        if kind == "checkerboard":
+            c0 = self.rgb(p["color0"]) if "color0" in p else (0.4, 0.4, 0.4)
+            c1 = self.rgb(p["color1"]) if "color1" in p else (0.2, 0.2, 0.2)
+            return TextureSpec("checker", color0=c0, color1=c1, uv=tuple(m[:2].reshape(-1)), where=self.where(el))
+        self.warn(el, f"texture type {kind!r} is not supported; its constant 0.5 is used")
+        return None
+
+    def add_texture(self, spec):
+        if spec is None:
+            return -1
+        self.textures.append(spec)
+        return len(self.textures) - 1
+
+    def bsdf(self, el, one_sided=True):
+        """(type, param (N_PARAM,), tex (N_TEX_SLOTS,)) of a <bsdf>."""
+        kind = self.attr(el, "type")
+        p = self.props(el)
+        param = np.zeros(bsdfs.N_PARAM)
+        tex = [-1] * N_TEX_SLOTS
+        flags = bsdfs.ONE_SIDED if one_sided else 0
+        if kind == "twosided":
+            inner = [c for c in el if c.tag in ("bsdf", "ref")]
+            if not inner:
+                raise SceneError(f"{self.where(el)}: twosided without a nested bsdf")
+            child = inner[0] if inner[0].tag == "bsdf" else self.ids.get(self.attr(inner[0], "id"))
+            if child is None:
+                raise SceneError(f"{self.where(inner[0])}: no bsdf with id {inner[0].get('id')!r}")
+            return self.bsdf(child, one_sided=False)
+        alpha = self.number(p["alpha"]) if "alpha" in p else 0.1
+        dist = self.attr(p["distribution"], "value") if "distribution" in p else "beckmann"
+        ior_in = self.number(p["int_ior"]) if "int_ior" in p else 1.5046
+        ior_out = self.number(p["ext_ior"]) if "ext_ior" in p else 1.000277
+        if kind in ("diffuse", "roughdiffuse"):
+            if kind == "roughdiffuse":
+                self.warn(el, "roughdiffuse is rendered as diffuse (as Mitsuba 3 does)")
+            kd, t = self.color_or_texture(p.get("reflectance"), (0.5, 0.5, 0.5))
+            param[0:3] = kd
+            tex[TEX_SLOT_KD] = self.add_texture(t)
+            param[14] = flags
+            return bsdfs.DIFFUSE, param, tex
+        if kind in ("conductor", "roughconductor"):
+            ks, t = self.color_or_texture(p.get("specular_reflectance"), (1.0, 1.0, 1.0))
+            param[3:6] = ks
+            tex[TEX_SLOT_KS] = self.add_texture(t)
+            metal = self.attr(p["material"], "value") if "material" in p else "Cu"
+            if metal not in METALS:
+                raise SceneError(f"{self.where(el)}: conductor material {metal!r} unknown; valid: {', '.join(METALS)}")
+            eta, k = METALS[metal]
+            if "eta" in p:
+                eta = self.rgb(p["eta"])
+            if "k" in p:
+                k = self.rgb(p["k"])
+            ext = self.number(p["ext_eta"]) if "ext_eta" in p else 1.0
+            param[8:11] = np.asarray(eta) / ext
+            param[11:14] = np.asarray(k) / ext
+            param[6] = alpha if kind == "roughconductor" else 0.0
+            if kind == "roughconductor" and dist == "beckmann":
+                flags |= bsdfs.BECKMANN
+            param[14] = flags
+            return bsdfs.METAL, param, tex
+        if kind in ("dielectric", "roughdielectric", "thindielectric"):
+            param[7] = ior_in / ior_out
+            if kind == "roughdielectric":
+                if dist != "ggx":
+                    self.warn(el, "roughdielectric with the Beckmann distribution is rendered with GGX")
+                param[6] = alpha
+                return bsdfs.ROUGH_DIELECTRIC, param, tex
+            return (bsdfs.THIN_DIELECTRIC if kind == "thindielectric" else bsdfs.DIELECTRIC), param, tex
+        if kind in ("plastic", "roughplastic"):
+            kd, t = self.color_or_texture(p.get("diffuse_reflectance"), (0.5, 0.5, 0.5))
+            self.warn(el, f"{kind} is not supported yet: rendered as the tracer's Fresnel-less plastic (kd = its "
+                          "diffuse_reflectance, ks 0.04)")
+            param[0:3] = kd
+            param[3:6] = 0.04
+            param[6] = max(alpha if kind == "roughplastic" else 0.01, 1e-3)
+            tex[TEX_SLOT_KD] = self.add_texture(t)
+            return bsdfs.PLASTIC, param, tex
+        self.warn(el, f"bsdf type {kind!r} is not supported; rendered as diffuse 0.5")
+        param[0:3] = 0.5
+        return bsdfs.DIFFUSE, param, tex
+
+    # --- shapes -------------------------------------------------------------------------------
+    def shape(self, el):
+        kind = self.attr(el, "type")
+        p = self.props(el)
+        m = self.matrix(p["to_world"]) if "to_world" in p else np.eye(4)
+        if kind == "obj":
+            file = os.path.join(self.folder, self.attr(p["filename"], "value"))
+            if not os.path.isfile(file):
+                self.warn(el, f"shape file {os.path.relpath(file, self.folder)!r} not found; the shape is left out")
+                return
+            mesh = read_geometry(file, self.warnings)
+            tri, uv, nrm = mesh.tri, mesh.uv, mesh.normals
+            face = "face_normals" in p and self.attr(p["face_normals"], "value") == "true"
+            if face:
+                nrm = None
+            elif nrm is None:
+                self.warn(el, "Mitsuba computes smooth vertex normals for this OBJ (it has no vn and "
+                              "face_normals is off); the tracer shades it flat")
+        elif kind == "rectangle":
+            tri = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]], float)
+            uv = np.array([[[0, 1], [1, 1], [1, 0]], [[0, 1], [1, 0], [0, 0]]], float)  # Mitsuba's (u, 1 - v)
+            nrm = None
+        else:
+            self.warn(el, f"shape type {kind!r} is not supported yet; the shape is left out")
+            return
+        flip = "flip_normals" in p and self.attr(p["flip_normals"], "value") == "true"
+        tri = tri @ m[:3, :3].T + m[:3, 3]  # (the winding, and so the normal, of the world-space corners)
+        if flip:
+            tri = tri[:, ::-1]
+            uv = uv[:, ::-1] if uv is not None else None
+            nrm = nrm[:, ::-1] if nrm is not None else None
+        if nrm is not None:
+            nrm = nrm @ np.linalg.inv(m[:3, :3])  # normals by the inverse transpose
+            if flip:
+                nrm = -nrm
+        # material: the shape's BSDF (a shared one is one material), with its emission if any
+        b = [c for c in el if c.tag in ("bsdf", "ref")]
+        bel = None
+        name = f"{kind}@{getattr(el, 'line', '?')}"
+        if b:
+            bel = b[0] if b[0].tag == "bsdf" else self.ids.get(self.attr(b[0], "id"))
+            if bel is None:
+                raise SceneError(f"{self.where(b[0])}: no bsdf with id {b[0].get('id')!r}")
+            name = bel.get("id") or f"bsdf@{getattr(bel, 'line', '?')}"
+        emission = np.zeros(3)
+        for e in (c for c in el if c.tag == "emitter"):
+            if self.attr(e, "type") != "area":
+                self.warn(e, f"emitter type {self.attr(e, 'type')!r} on a shape is not supported; ignored")
+                continue
+            ep = self.props(e)
+            emission = np.asarray(self.rgb(ep["radiance"]) if "radiance" in ep else (1.0, 1.0, 1.0))
+            name = f"{name}+emitter@{e.line}"
+        if name not in self.by_name:
+            if bel is not None:
+                mtype, param, tex = self.bsdf(bel)
+            else:  # Mitsuba's default: diffuse 0.5, one-sided
+                mtype, param, tex = bsdfs.DIFFUSE, np.zeros(bsdfs.N_PARAM), [-1] * N_TEX_SLOTS
+                param[0:3] = 0.5
+                param[14] = bsdfs.ONE_SIDED
+            self.by_name[name] = len(self.materials)
+            self.materials.append((name, mtype, param, emission, tuple(tex)))
+        n = tri.shape[0]
+        self.tris.append(tri)
+        self.mats.append(np.full(n, self.by_name[name], np.int32))
+        self.uvs.append(uv if uv is not None else np.zeros((n, 3, 2)))
+        self.normals.append(nrm if nrm is not None else np.zeros((n, 3, 3)))
+
+    # --- the scene ------------------------------------------------------------------------------
+    def read(self):
+        root = _parse(self.path)
+        if root.tag != "scene":
+            raise SceneError(f"{self.path}: the root element is <{root.tag}>, not <scene>")
+        for el in root:
+            if el.tag == "default":
+                self.defaults.setdefault(el.get("name"), el.get("value"))
+        for el in root.iter():
+            if el.get("id") is not None and el.tag in ("bsdf", "texture"):
+                self.ids[el.get("id")] = el
+        spec_cam, width, height, render = CameraSpec(where=f"{self.path}: sensor"), 768, 576, RenderSettings()
+        for el in root:
+            tag = el.tag
+            if tag in ("default", "bsdf", "texture"):
+                continue
+            if tag == "integrator":
+                p = self.props(el)
+                if "max_depth" in p:
+                    render.max_depth = int(self.number(p["max_depth"]))
+            elif tag == "sensor":
+                spec_cam, width, height, spp = self.sensor(el, spec_cam)
+                if spp:
+                    render.spp = spp
+            elif tag == "shape":
+                self.shape(el)
+            else:
+                self.warn(el, f"<{tag}> is not supported yet; ignored")
+        if not self.tris:
+            raise SceneError(f"{self.path}: no shape the tracer can read")
+        has_uv = any(np.any(u) for u in self.uvs)
+        has_n = any(np.any(n) for n in self.normals)
+        return SceneSpec(path=self.path, geometry_file=self.path, tri=np.concatenate(self.tris),
+                         tri_material=np.concatenate(self.mats), materials=self.materials, width=width,
+                         height=height, render=render, camera=spec_cam, warnings=self.warnings,
+                         no_light="no area emitter on any shape", uv=np.concatenate(self.uvs) if has_uv else None,
+                         normals=np.concatenate(self.normals) if has_n else None, textures=self.textures)
+
+    def sensor(self, el, cam):
+        if self.attr(el, "type") not in ("perspective", "thinlens"):
+            raise SceneError(f"{self.where(el)}: sensor type {self.attr(el, 'type')!r} is not supported")
+        if self.attr(el, "type") == "thinlens":
+            self.warn(el, "thinlens is rendered as a pinhole (perspective)")
+        p = self.props(el)
+        cam.fov = self.number(p["fov"]) if "fov" in p else 45.0
+        axis = self.attr(p["fov_axis"], "value") if "fov_axis" in p else "x"
+        if axis not in ("x", "y"):
+            self.warn(p["fov_axis"], f"fov_axis {axis!r} is not supported yet; x is used")
+            axis = "x"
+        cam.fov_axis = axis
+        if "to_world" in p:
+            cam.matrix = self.matrix(p["to_world"])
+        width, height, spp = 768, 576, 0
+        for c in el:
+            if c.tag == "film":
+                fp = self.props(c)
+                width = int(self.number(fp["width"])) if "width" in fp else width
+                height = int(self.number(fp["height"])) if "height" in fp else height
+                for f in c:
+                    if f.tag == "rfilter" and self.attr(f, "type") != "box":
+                        self.warn(f, f"rfilter {self.attr(f, 'type')!r} is rendered with the box filter")
+            elif c.tag == "sampler":
+                sp = self.props(c)
+                spp = int(self.number(sp["sample_count"])) if "sample_count" in sp else 0
+        return cam, width, height, spp
+
+
+def read_mitsuba_scene(path, defines=None):
+    """The SceneSpec of a Mitsuba scene XML (see the module docstring); `defines` override its
+    <default> values as `mitsuba -D name=value` does."""
+    return _Reader(path, defines).read()
+
