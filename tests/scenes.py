@@ -95,11 +95,13 @@ def light_quad(folder, radiance, width=8, height=8):
 def textured(scene):
     """`scene` (a loaded Scene, changed in place and returned) with what the material step reads:
     planar UVs, a checkerboard (two colours, 4 x 4 per unit of UV) on the kd of every diffuse
-    material, and corner normals tilted off the face normals by up to ~10 degrees, varying
+    material, materials named floor and furniture made Mitsuba's smooth and rough plastic (COATED,
+    textured), and corner normals tilted off the face normals by up to ~10 degrees, varying
     smoothly with position (shading normals: the light-leak mask and the photons' adjoint factor
     act)."""
     from tracer import bsdfs
     from tracer.material import N_TEX_SLOTS
+    from tracer.scene import prepare_coats
     from tracer.textures import TextureSpec, build_textures
 
     tri = scene.tri
@@ -113,8 +115,19 @@ def textured(scene):
     scene.tri_vn = np.ascontiguousarray(vn)
     scene.textures = build_textures([TextureSpec("checker", color0=(0.8, 0.35, 0.2), color1=(0.25, 0.6, 0.75),
                                                  uv=(4.0, 0.0, 0.0, 0.0, 4.0, 0.0))], [])
-    scene.materials.tex = np.full((len(scene.materials.names), N_TEX_SLOTS), -1, np.int32)
-    scene.materials.tex[scene.materials.type == bsdfs.DIFFUSE, 0] = 0
+    mats = scene.materials
+    mats.tex = np.full((len(mats.names), N_TEX_SLOTS), -1, np.int32)
+    mats.tex[mats.type == bsdfs.DIFFUSE, 0] = 0
+    # ajar's floor: Mitsuba's smooth plastic (a delta lobe beside the diffuse one); its furniture:
+    # a rough GGX plastic (both textured)
+    for name, alpha in (("floor", 0.0), ("furniture", 0.2)):
+        if name in mats.names:
+            m = mats.names.index(name)
+            mats.type[m] = bsdfs.COATED
+            mats.param[m, bsdfs.P_KS:bsdfs.P_KS + 3] = 1.0
+            mats.param[m, bsdfs.P_ALPHA] = alpha
+            mats.param[m, bsdfs.P_IOR] = 1.5
+    prepare_coats(mats, scene.textures)
     return scene
 
 

@@ -23,10 +23,10 @@ PLASTIC_KD = (0.5, 0.3, 0.2)
 PLASTIC_KS = (0.4, 0.4, 0.4)
 
 
-def material(t, alpha=0.3, ior=1.5, kd=KD, ks=KS, eta=(0.0, 0.0, 0.0), k=(0.0, 0.0, 0.0), flags=0):
-    """One material as (mat_type (1,) int32, mat_param (1, N_PARAM) float64)."""
+def material(t, alpha=0.3, ior=1.5, kd=KD, ks=KS, eta=(0.0, 0.0, 0.0), k=(0.0, 0.0, 0.0), flags=0, clear=0.0):
+    """One material as (mat_type (1,) int32, mat_param (1, N_PARAM) float64); clear = 1 - opacity."""
     mat_type = np.array([t], dtype=np.int32)
-    mat_param = np.array([[*kd, *ks, alpha, ior, *eta, *k, flags, 0.0]], dtype=np.float64)
+    mat_param = np.array([[*kd, *ks, alpha, ior, *eta, *k, flags, 0.0, clear]], dtype=np.float64)
     return mat_type, mat_param
 
 
@@ -61,6 +61,9 @@ CASES += [("rough_dielectric", B.ROUGH_DIELECTRIC, dict(alpha=0.3, ior=1.5), 1.0
 GOLD = dict(eta=(0.143036, 0.375307, 1.44205), k=(3.983, 2.38556, 1.60336))  # tracer.metals "Au"
 CASES += [("metal", B.METAL, dict(alpha=0.3, **GOLD), z) for z in WO_TWO_SIDED]
 CASES += [("metal_beckmann", B.METAL, dict(alpha=0.3, flags=B.BECKMANN, **GOLD), z) for z in (0.8, 0.1)]
+COAT = dict(kd=PLASTIC_KD, ks=(1.0, 1.0, 1.0), ior=1.49)
+CASES += [("coated", B.COATED, dict(alpha=0.3, **COAT), z) for z in WO_TWO_SIDED]
+CASES += [("coated_beckmann", B.COATED, dict(alpha=0.2, flags=B.BECKMANN | B.NONLINEAR, **COAT), 0.5)]
 
 
 def case_id(c):
@@ -73,7 +76,7 @@ IDS = [case_id(c) for c in CASES]
 DIELECTRIC_CASES = [(ior, z) for ior in (1.5, 1.33) for z in (0.9, 0.5, 0.1, -0.9, -0.5, -0.1)]
 # Statistical tests in this file: chi-square and pdf integral per case, 3 channels x 2 (mean
 # against integral, mean at most 1) per case, Fresnel frequencies, the two power checks
-NTESTS = len(CASES) * (2 + 6) + len(DIELECTRIC_CASES) + 2
+NTESTS = len(CASES) * (2 + 6) + len(DIELECTRIC_CASES) + 2 + 3 + 3
 Z = z_critical(NTESTS)
 
 
@@ -217,6 +220,71 @@ def test_chi2_detects_wrong_pdf():
         return B.pdf_batch(*m_p, 0, tile(wo, len(d)), d)
 
     assert not ChiSquareTest(sampler(m_s, wo), pdf_wrong, n=N).run(ntests=NTESTS)
+
+
+def test_smooth_coat_delta_and_diffuse_lobes():
+    """The smooth COATED (Mitsuba's plastic): samples flagged delta are the mirror direction, drawn
+    with the lobe's probability (binomial z-test on their frequency); the others follow the pdf
+    (chi-square, the delta samples counted as failures, so the pdf must integrate to 1 - P(delta));
+    the mean weight equals F(cos) ks plus the integral of the diffuse f |cos| (F from the Fresnel
+    formula written here). Detects a lobe probability or weight that is off, and a diffuse pdf that
+    ignores the delta lobe's share."""
+    wo = direction(0.6)
+    mat = material(B.COATED, alpha=0.0, **COAT)
+    u = np.random.default_rng(3).random((N, 3))
+    wi, beta, pdf, delta = B.sample_batch(*mat, 0, tile(wo, N), u, True)
+    _, val, prob = B.delta_lobe(B.bsdf_row(*mat, 0), tuple(wo), False, True)
+    f_share = delta.mean()
+    assert abs(f_share - prob) <= Z * math.sqrt(prob * (1 - prob) / N), (f_share, prob)
+    np.testing.assert_allclose(wi[delta], np.tile([-wo[0], -wo[1], wo[2]], (int(delta.sum()), 1)), atol=1e-12)
+    np.testing.assert_allclose(pdf[delta], prob, rtol=1e-12)
+    wi_nan = np.where((~delta)[:, None] & (pdf > 0)[:, None], wi, np.nan)
+    chi = ChiSquareTest(lambda uu: wi_nan, pdf_fn(mat, wo), n=N, seed=3)
+    assert chi.run(ntests=NTESTS), chi.message
+    assert abs(chi.pdf_integral - (1.0 - prob)) <= 1e-6 + chi.quad_error
+    # Fresnel of n = 1.49 at cos 0.6, written out: s- and p-polarised amplitudes
+    n, ci = 1.49, 0.6
+    ct = math.sqrt(1 - (1 - ci * ci) / n ** 2)
+    fr = 0.5 * (((ci - n * ct) / (ci + n * ct)) ** 2 + ((n * ci - ct) / (n * ci + ct)) ** 2)
+    np.testing.assert_allclose(val, (fr, fr, fr), rtol=1e-12)
+    cells, err, info = sphere_grid().integrate(eval_fn(mat, wo), tol_total=lambda tot: 1e-6)
+    assert info["converged"]
+    expect = fr + cells.reshape(-1, 3).sum(axis=0)
+    se = beta.std(axis=0) / math.sqrt(N)
+    assert np.all(np.abs(beta.mean(axis=0) - expect) <= Z * np.sqrt(se ** 2 + err.reshape(-1, 3).sum(0) ** 2)), \
+        (beta.mean(axis=0), expect)
+
+
+@pytest.mark.parametrize("t,kw", [(B.DIFFUSE, dict(clear=0.35)), (B.CONDUCTOR, dict(alpha=0.2, clear=0.6))],
+                         ids=["diffuse", "conductor"])
+def test_opacity_mask_passes_straight_through(t, kw):
+    """An opacity mask (params[P_CLEAR] = 1 - opacity): samples flagged delta go straight through
+    (wi = -wo) with frequency `clear` (binomial z-test), weight 1; the others follow the pdf
+    (chi-square: the pdf integrates to (1 - clear) P(success)); eval is (1 - clear) times the
+    unmasked BSDF's (written here from the same material without the mask); the mean weight is
+    clear plus the integral of f |cos|. Detects a pass drawn too often or too rarely, or a BSDF
+    part not scaled by the opacity."""
+    wo = direction(0.7)
+    mat = material(t, **kw)
+    bare = material(t, **dict(kw, clear=0.0))
+    c = kw["clear"]
+    u = np.random.default_rng(4).random((N, 3))
+    wi, beta, pdf, delta = B.sample_batch(*mat, 0, tile(wo, N), u, True)
+    assert abs(delta.mean() - c) <= Z * math.sqrt(c * (1 - c) / N), delta.mean()
+    np.testing.assert_allclose(wi[delta], np.tile(-wo, (int(delta.sum()), 1)), atol=1e-15)
+    assert np.all(beta[delta] == 1.0) and np.all(pdf[delta] == c)
+    wi_nan = np.where((~delta & (pdf > 0))[:, None], wi, np.nan)
+    chi = ChiSquareTest(lambda uu: wi_nan, pdf_fn(mat, wo), n=N, seed=4)
+    assert chi.run(ntests=NTESTS), chi.message
+    d = random_dirs(np.random.default_rng(5), 1000)
+    np.testing.assert_allclose(B.eval_batch(*mat, 0, tile(wo, 1000), d, True),
+                               (1 - c) * B.eval_batch(*bare, 0, tile(wo, 1000), d, True), rtol=1e-12)
+    _, val, prob = B.delta_lobe(B.bsdf_row(*mat, 0), tuple(wo), True, True)
+    assert prob == c and val == (c, c, c)
+    cells, err, info = sphere_grid().integrate(eval_fn(mat, wo), tol_total=lambda tot: 1e-6)
+    expect = c + cells.reshape(-1, 3).sum(axis=0)
+    se = beta.std(axis=0) / math.sqrt(N)
+    assert np.all(np.abs(beta.mean(axis=0) - expect) <= Z * np.sqrt(se ** 2 + err.reshape(-1, 3).sum(0) ** 2))
 
 
 # --- Reciprocity ---------------------------------------------------------------------------------
@@ -397,6 +465,11 @@ EDGE_PARAMS = [
     (B.ROUGH_DIELECTRIC, dict(alpha=3.0, ior=1.33)),
     (B.PLASTIC, dict(alpha=0.0, kd=(0, 0, 0), ks=(0, 0, 0))),
     (B.PLASTIC, dict(alpha=1e-4)),
+    (B.COATED, dict(alpha=0.0, kd=(0, 0, 0), ks=(0, 0, 0))),
+    (B.COATED, dict(alpha=1e-4, kd=(1, 1, 1), flags=B.NONLINEAR)),
+    (B.COATED, dict(alpha=3.0, ior=1.0, flags=B.BECKMANN)),
+    (B.DIFFUSE, dict(clear=1.0)),
+    (B.COATED, dict(alpha=0.0, clear=0.5)),
 ]
 
 
@@ -453,15 +526,20 @@ def test_finite_outputs(t, kw):
 # --- Small helpers -------------------------------------------------------------------------------
 def test_is_delta_and_albedo():
     kinds = [B.DIFFUSE, B.CONDUCTOR, B.MIRROR, B.DIELECTRIC, B.ROUGH_DIELECTRIC, B.PLASTIC, B.METAL, B.METAL,
-             B.THIN_DIELECTRIC]
-    assert [B.TYPE_NAMES[k] for k in kinds[:7]] + [B.TYPE_NAMES[kinds[8]]] == list(B.TYPE_NAMES)
+             B.THIN_DIELECTRIC, B.COATED, B.COATED]
+    assert [B.TYPE_NAMES[k] for k in kinds[:7]] + [B.TYPE_NAMES[k] for k in kinds[8:10]] == list(B.TYPE_NAMES)
     mat_type = np.array(kinds, dtype=np.int32)
-    mat_param = np.tile([*KD, *KS, 1e-5, 1.5, *GOLD["eta"], *GOLD["k"], 0, 0], (9, 1))
+    mat_param = np.tile([*KD, *KS, 1e-5, 1.5, *GOLD["eta"], *GOLD["k"], 0, 0], (11, 1))
     mat_param[7, 6] = 0.0  # a smooth METAL
-    assert [B.bsdf_is_delta(B.bsdf_row(mat_type, mat_param, m)) for m in range(9)] == [
-        False, False, True, True, False, False, False, True, True,
+    mat_param[9, 6] = 0.0  # a smooth COATED: a delta lobe beside a diffuse one
+    assert [B.bsdf_is_delta(B.bsdf_row(mat_type, mat_param, m)) for m in range(11)] == [
+        False, False, True, True, False, False, False, True, True, False, False,
     ]
-    albedo = [B.bsdf_albedo(B.bsdf_row(mat_type, mat_param, m)) for m in range(9)]
+    assert [B.bsdf_has_delta(B.bsdf_row(mat_type, mat_param, m)) for m in range(11)] == [
+        False, False, True, True, False, False, False, True, True, True, False,
+    ]
+    albedo = [B.bsdf_albedo(B.bsdf_row(mat_type, mat_param, m)) for m in range(11)]
+    assert albedo[9] == KD and albedo[10] == KD
     assert albedo[0] == KD and albedo[1] == KS and albedo[2] == KS
     assert albedo[3] == (1.0, 1.0, 1.0) and albedo[4] == (1.0, 1.0, 1.0) and albedo[8] == (1.0, 1.0, 1.0)
     np.testing.assert_allclose(albedo[5], np.minimum(np.add(KD, KS), 1.0))

@@ -187,7 +187,7 @@ def test_pbr_statements_mean_what_gltf_means():
         d = pathlib.Path(d)
         (t, p, e, tex), w, _ = _one_material(d, "Kd 1 0.77 0.34\nKs 0.5 0.5 0.5\nPm 1\nPr 0.2\nillum 3")
         assert t == bsdfs.CONDUCTOR and np.allclose(p[3:6], [1, 0.77, 0.34]) and np.isclose(p[6], 0.04)
-        assert tex == (-1, -1, -1) and not w
+        assert tex == (-1,) * len(tex) and not w
         (t, p, e, tex), w, _ = _one_material(d, "Kd 0 0 0\nKs 0.9 0.9 0.9\nPr 0.5\nPm 1\nillum 2")
         assert t == bsdfs.CONDUCTOR and np.allclose(p[3:6], 0.9) and np.isclose(p[6], 0.25)
         (t, p, e, tex), w, _ = _one_material(d, "Kd 0.2 0.4 0.6\nKs 0.5 0.5 0.5\nPr 0.3\nNi 1.5\nillum 2")
@@ -279,14 +279,97 @@ def test_bump_map_without_uvs_is_a_warning(tmp_path):
 
 
 def test_a_see_through_material_names_the_sidecar_fix():
-    """`d 0.4` on an illum 2 material (how exporters write glass they cannot describe): one warning
-    that it renders opaque, naming materials.NAME.type; `d 1` (every Blender material) says nothing."""
+    """`d 0.4` on an illum 2 material (how exporters write glass they cannot describe): rendered
+    with opacity 0.4 (`Tr` is 1 - d), and one warning naming materials.NAME.type; `d 1` (every
+    Blender material) says nothing."""
     import pathlib
     import tempfile
 
     with tempfile.TemporaryDirectory() as d:
         d = pathlib.Path(d)
-        (t, _, _, _), w, _ = _one_material(d, "Kd 0.8 0.8 0.8\nNi 1.45\nd 0.4\nillum 2")
+        (t, p, _, _), w, _ = _one_material(d, "Kd 0.8 0.8 0.8\nNi 1.45\nd 0.4\nillum 2")
         assert t == bsdfs.DIFFUSE and len(w) == 1 and 'materials.m.type to "dielectric"' in w[0] and "d 0.4" in w[0]
+        assert p[bsdfs.P_CLEAR] == pytest.approx(0.6)  # rendered with opacity 0.4
+        (t, p, _, _), w, _ = _one_material(d, "Kd 0.8 0.8 0.8\nTr 0.25")
+        assert p[bsdfs.P_CLEAR] == pytest.approx(0.25)
         (t, _, _, _), w, _ = _one_material(d, "Kd 0.8 0.8 0.8\nNi 1.45\nd 1.0\nillum 2")
         assert not w
+
+
+@pytest.mark.parametrize("mtl,sky", [("Kd 0 0 0\nmap_d op.png", 1.0), ("Kd 0 0 0\nd 0.3", 1.0),
+                                     ("Kd 0.5 0.5 0.5\nd 0.3", 0.0)])
+def test_opacity_lets_the_sky_through(tmp_path, mtl, sky):
+    """A quad with an opacity (MTL map_d: an 8 x 8 grey sRGB PNG, or d 0.3) in front of the
+    camera. Black (Kd 0) under a sky of radiance 1: each pixel (point filter) is 1 - opacity,
+    the opacity decoded from sRGB and filtered bilinearly by NumPy here. Kd 0.5 lit by a one-sided
+    lamp behind the camera facing it, no sky: the quad reflects opacity x Kd / pi x the lamp's
+    irradiance (the same test through the BSDF part). z-test of every pixel and a chi-square of
+    their mean square; detects an opacity inverted, ignored, read without decoding, or applied to
+    the wrong share. (Under the sky each sample is 0 or 1: the test uses the binomial variance.)"""
+    rng = np.random.default_rng(8)
+    grey = rng.integers(0, 256, size=(8, 8, 1), dtype=np.uint8)
+    _write_png(tmp_path / "op.png", np.repeat(grey, 3, axis=2))
+    obj = ["mtllib q.mtl", "usemtl tex", "v -1 -1 0", "v 1 -1 0", "v 1 1 0", "v -1 1 0",
+           "vt 0 0", "vt 1 0", "vt 1 1", "vt 0 1", "f 1/1 2/2 3/3 4/4"]
+    side = {"camera": {"origin": [0, 0, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 30},
+            "film": {"width": W, "height": H}}
+    if sky:
+        side["environment"] = {"radiance": [sky] * 3}
+    else:  # a large lamp at z = 20 facing -z (toward the quad); the camera sits in front of it
+        obj += ["usemtl lamp", "v -40 -40 20", "v 40 -40 20", "v 40 40 20", "v -40 40 20", "f 5 7 6", "f 5 8 7"]
+    (tmp_path / "q.obj").write_text("\n".join(obj) + "\n")
+    (tmp_path / "q.mtl").write_text(f"newmtl tex\n{mtl}\nnewmtl lamp\nKd 0 0 0\nKe 1 1 1\n")
+    (tmp_path / "q.json").write_text(json.dumps(side))
+    scene = tracer.load_scene(str(tmp_path / "q.obj"))
+    r = tracer.render(scene, spp=256, max_depth=3, seed=2, pixel_filter="point")
+    assert r.stats["nonfinite_samples"] == 0
+    if "map_d" in mtl:
+        uv = _pixel_uv(scene)
+        op = _bilinear_repeat(_srgb_to_linear(np.repeat(grey, 3, axis=2) / 255.0), uv[..., 0], uv[..., 1])
+    else:
+        op = np.full((H, W, 3), 0.3)
+    var = r.variance
+    if sky:
+        ref = 1.0 - op
+        var = np.maximum(op * (1.0 - op) / 256, 1e-12)  # each sample passes (1) or not (0): binomial
+    else:
+        # irradiance at the quad's centre region from the 80 x 80 lamp 20 away, per pixel's point
+        x = (_pixel_uv(scene) * 2.0 - 1.0)
+        e = np.zeros((H, W))
+        g = (np.arange(400) + 0.5) / 400 * 80 - 40  # midpoint rule over the lamp
+        lx, ly = np.meshgrid(g, g)
+        for py in range(H):
+            for px in range(W):
+                dx, dy = lx - x[py, px, 0], ly - x[py, px, 1]
+                d2 = dx * dx + dy * dy + 400.0
+                e[py, px] = np.sum(400.0 / (d2 * d2)) * (80 / 400) ** 2
+        ref = op * 0.5 / np.pi * e[..., None]
+    z = (r.image - ref) / np.sqrt(var)
+    assert np.abs(z).max() < 5.0, np.abs(z).max()
+    assert abs(np.mean(z ** 2) - 1.0) < 5 * math.sqrt(2.0 / z.size)
+
+
+def test_sidecar_makes_a_coated_material_and_glass_drops_opacity(tmp_path):
+    """materials.NAME {type coated, alpha, ior, nonlinear, opacity}: a COATED row with the flag,
+    1 - opacity in P_CLEAR and its table and sampling weight filled at build; `type: dielectric` on
+    a material with `d 0.4` (the sidecar fix the warning names) drops the opacity; opacity outside
+    [0, 1] is one error."""
+    from tracer.errors import SceneError
+
+    obj = _textured_quad(tmp_path, "Kd 0.5 0.5 0.5\nd 0.4", np.zeros((2, 2, 3), np.uint8))
+    side = json.loads((tmp_path / "q.json").read_text())
+    side["materials"] = {"tex": {"type": "coated", "alpha": 0.1, "ior": 1.5, "nonlinear": True, "opacity": 0.8}}
+    (tmp_path / "q.json").write_text(json.dumps(side))
+    m = tracer.load_scene(obj).materials
+    k = m.names.index("tex")
+    assert m.type[k] == bsdfs.COATED and int(m.param[k, 14]) & bsdfs.NONLINEAR
+    assert m.param[k, bsdfs.P_CLEAR] == pytest.approx(0.2) and m.param[k, bsdfs.P_SPEC_WEIGHT] > 0
+    assert np.all(m.table[k] > 0)
+    side["materials"] = {"tex": {"type": "dielectric", "ior": 1.5}}
+    (tmp_path / "q.json").write_text(json.dumps(side))
+    m = tracer.load_scene(obj).materials
+    assert m.param[m.names.index("tex"), bsdfs.P_CLEAR] == 0.0
+    side["materials"] = {"tex": {"opacity": 1.5}}
+    (tmp_path / "q.json").write_text(json.dumps(side))
+    with pytest.raises(SceneError, match="opacity must be in"):
+        tracer.load_scene(obj)

@@ -137,3 +137,165 @@ def test_the_textured_veach_ajar_renders():
     assert len(said) == 1 and "rfilter 'tent'" in said[0]  # all else is read
     r = tracer.render(scene, spp=4, seed=1, max_depth=8)
     assert r.stats["nonfinite_samples"] == 0 and r.image.mean() > 0
+
+
+PLASTICS = """<scene version="0.6.0">
+    <sensor type="perspective"><float name="fov" value="40"/>
+        <transform name="toWorld"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
+    </sensor>
+    <bsdf type="plastic" id="Shiny">
+        <string name="intIOR" value="bk7"/><boolean name="nonlinear" value="true"/>
+        <rgb name="diffuseReflectance" value="0.6, 0.3, 0.2"/>
+    </bsdf>
+    <bsdf type="twosided" id="Satin"><bsdf type="roughplastic">
+        <float name="intIOR" value="1.6"/><string name="extIOR" value="water"/>
+        <float name="alpha" value="0.15"/><string name="distribution" value="beckmann"/>
+        <rgb name="specularReflectance" value="0.5, 0.5, 0.5"/>
+    </bsdf></bsdf>
+    <bsdf type="plastic" id="Odd"><string name="intIOR" value="unobtainium"/></bsdf>
+    <shape type="rectangle"><ref id="Shiny"/></shape>
+    <shape type="rectangle"><transform name="toWorld"><translate z="-1"/></transform><ref id="Satin"/></shape>
+    <shape type="rectangle"><transform name="toWorld"><translate z="2"/></transform>
+        <emitter type="area"><rgb name="radiance" value="1, 1, 1"/></emitter></shape>
+</scene>
+"""
+
+
+def test_plastics_become_coated(tmp_path):
+    """plastic / roughplastic (0.6 camelCase names) as COATED: the index ratio with Mitsuba's named
+    media (bk7 over air; 1.6 over water), nonlinear, Beckmann, one-sided unless twosided, default
+    reflectances (diffuse 0.5, specular 1), the specular sampling weight mean(ks) / (mean(kd) +
+    mean(ks)) and the rough coat's table filled at build; an unknown medium name is one error line
+    naming the file and line."""
+    f = tmp_path / "scene.xml"
+    f.write_text(PLASTICS.replace('<bsdf type="plastic" id="Odd"><string name="intIOR" value="unobtainium"/></bsdf>', ""))
+    m = tracer.load_scene(str(f)).materials
+    shiny, satin = m.names.index("Shiny"), m.names.index("Satin")
+    assert m.type[shiny] == m.type[satin] == bsdfs.COATED
+    ps, pt = m.param[shiny], m.param[satin]
+    assert ps[bsdfs.P_IOR] == pytest.approx(1.5046 / 1.000277) and pt[bsdfs.P_IOR] == pytest.approx(1.6 / 1.333)
+    assert int(ps[14]) == bsdfs.ONE_SIDED | bsdfs.NONLINEAR and int(pt[14]) == bsdfs.BECKMANN
+    assert ps[bsdfs.P_ALPHA] == 0.0 and pt[bsdfs.P_ALPHA] == 0.15
+    np.testing.assert_allclose(ps[0:6], [0.6, 0.3, 0.2, 1, 1, 1])
+    np.testing.assert_allclose(pt[0:6], [0.5, 0.5, 0.5, 0.5, 0.5, 0.5])
+    assert ps[bsdfs.P_SPEC_WEIGHT] == pytest.approx(1.0 / (1.0 + np.mean([0.6, 0.3, 0.2])))
+    assert pt[bsdfs.P_SPEC_WEIGHT] == pytest.approx(0.5)
+    assert np.all(m.table[shiny] == 0) and np.all((m.table[satin] > 0) & (m.table[satin] <= 1))
+    f.write_text(PLASTICS.replace('<shape type="rectangle"><ref id="Shiny"/>', '<shape type="rectangle"><ref id="Odd"/>'))
+    with pytest.raises(tracer.SceneError, match=r"scene.xml:\d+: int_ior 'unobtainium'"):
+        tracer.load_scene(str(f))
+
+
+WRAPPERS = """<scene version="0.6.0">
+    <sensor type="perspective"><float name="fov" value="40"/>
+        <transform name="toWorld"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
+    </sensor>
+    <bsdf type="mask" id="Leaf"><float name="opacity" value="0.25"/>
+        <bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>
+    <bsdf type="mask" id="Rug">
+        <texture name="opacity" type="bitmap"><string name="filename" value="wood.png"/></texture>
+        <bsdf type="diffuse"/></bsdf>
+    <bsdf type="bumpmap" id="Tiles">
+        <texture name="map" type="bitmap"><string name="filename" value="wood.png"/></texture>
+        <float name="scale" value="0.3"/>
+        <bsdf type="twosided"><bsdf type="roughplastic"><float name="alpha" value="0.2"/></bsdf></bsdf>
+    </bsdf>
+    <shape type="rectangle"><ref id="Leaf"/></shape>
+    <shape type="rectangle"><transform name="toWorld"><translate z="-1"/></transform><ref id="Rug"/></shape>
+    <shape type="rectangle"><transform name="toWorld"><translate z="-2"/></transform><ref id="Tiles"/></shape>
+    <shape type="rectangle"><transform name="toWorld"><translate z="2"/></transform>
+        <emitter type="area"><rgb name="radiance" value="1, 1, 1"/></emitter></shape>
+</scene>
+"""
+
+
+def test_mask_and_bumpmap_wrap_their_bsdf(tmp_path):
+    """`mask` (opacity a number: params[P_CLEAR] = 1 - opacity; a texture: the opacity slot) and
+    `bumpmap` (the height texture in the bump slot, `scale` its scale) around a nested BSDF keep
+    the nested one's type and sidedness; the scene renders clean."""
+    from tracer.material import P_BUMP_SCALE, TEX_SLOT_BUMP, TEX_SLOT_OPACITY
+
+    _write(tmp_path)  # (writes wood.png)
+    f = tmp_path / "wrap.xml"
+    f.write_text(WRAPPERS)
+    scene = tracer.load_scene(str(f))
+    m = scene.materials
+    leaf, rug, tiles = (m.names.index(n) for n in ("Leaf", "Rug", "Tiles"))
+    assert m.type[leaf] == bsdfs.DIFFUSE and m.param[leaf, bsdfs.P_CLEAR] == 0.75
+    assert not int(m.param[leaf, 14]) & bsdfs.ONE_SIDED and int(m.param[rug, 14]) & bsdfs.ONE_SIDED
+    assert m.param[rug, bsdfs.P_CLEAR] == 0.0 and m.tex[rug, TEX_SLOT_OPACITY] >= 0
+    assert m.type[tiles] == bsdfs.COATED and m.tex[tiles, TEX_SLOT_BUMP] >= 0 and m.param[tiles, P_BUMP_SCALE] == 0.3
+    r = tracer.render(scene, spp=2, seed=1)
+    assert r.stats["nonfinite_samples"] == 0 and r.image.mean() > 0
+
+
+SHAPES = """<scene version="3.0.0">
+    <sensor type="perspective"><float name="fov" value="50"/><string name="fov_axis" value="$axis"/>
+        <transform name="to_world"><lookat origin="1, 2, 9" target="0, 0.5, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="40"/><integer name="height" value="24"/></film>
+    </sensor>
+    <default name="axis" value="x"/>
+    <bsdf type="diffuse" id="A"/><bsdf type="diffuse" id="B"/><bsdf type="diffuse" id="C"/><bsdf type="diffuse" id="D"/>
+    <shape type="cube"><transform name="to_world"><scale value="0.5"/><rotate y="1" angle="25"/>
+        <translate x="-1.5"/></transform><ref id="A"/></shape>
+    <shape type="sphere"><point name="center" x="1.2" y="0.4" z="0.3"/><float name="radius" value="0.7"/>
+        <ref id="B"/><emitter type="area"><rgb name="radiance" value="2, 2, 2"/></emitter></shape>
+    <shape type="disk"><transform name="to_world"><scale value="0.8"/><rotate x="1" angle="-90"/>
+        <translate y="-1"/></transform><ref id="C"/></shape>
+    <shape type="cylinder"><point name="p0" x="0" y="-1" z="-2"/><point name="p1" x="0.5" y="1.5" z="-2"/>
+        <float name="radius" value="0.3"/><ref id="D"/></shape>
+    <emitter type="constant"><rgb name="radiance" value="0.25, 0.5, 0.75"/></emitter>
+    <emitter type="sunsky"/>
+</scene>
+"""
+
+
+@pytest.mark.parametrize("axis", ["x", "y", "diagonal", "smaller", "larger"])
+def test_analytic_shapes_emitters_and_fov_axes_match_mitsuba(tmp_path, axis):
+    """cube, sphere (center, radius), disk and cylinder (p0, p1, radius) tessellated: each shape's
+    bounding box (to 1% of its size: the tessellation) and surface area (to 0.1%: the sphere,
+    disk and cylinder keep their area by construction) against Mitsuba 3's own shapes; every
+    triangle wound outward (the sphere's emission is one-sided); a constant emitter as the
+    environment; `sunsky` one warning line naming its line; the camera ray through the corner
+    pixel against Mitsuba's for every fov_axis (detects a fov converted on the wrong axis)."""
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    f = tmp_path / "shapes.xml"
+    f.write_text(SHAPES)
+    from tracer.readers.mitsuba import read_mitsuba_scene
+    from tracer.scene import build_scene
+
+    ours = build_scene(read_mitsuba_scene(str(f), {"axis": axis}))
+    ref = mi.load_file(str(f), axis=axis)
+    m = ours.materials
+    assert np.allclose(ours.environment.radiance, [0.25, 0.5, 0.75])
+    hit = [w for w in ours.warnings if "sunsky" in w]
+    assert len(hit) == 1 and f"shapes.xml:{SHAPES.splitlines().index('    <emitter type=\"sunsky\"/>') + 1}" in hit[0]
+    centres = {"A": (-1.5, 0, 0), "B": (1.2, 0.4, 0.3), "D": (0.25, 0.25, -2)}
+    for shape in ref.shapes():
+        bid = shape.bsdf().id()
+        k = next(i for i, n in enumerate(m.names) if n.startswith(bid))
+        tri = ours.tri[ours.tri_material == k]
+        bb = shape.bbox()
+        lo, hi = np.array(bb.min), np.array(bb.max)
+        size = float(np.max(hi - lo))
+        np.testing.assert_allclose(tri.reshape(-1, 3).min(0), lo, atol=0.01 * size, err_msg=bid)
+        np.testing.assert_allclose(tri.reshape(-1, 3).max(0), hi, atol=0.01 * size, err_msg=bid)
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        area = 0.5 * np.linalg.norm(n, axis=1).sum()
+        np.testing.assert_allclose(area, shape.surface_area(), rtol=1e-3, err_msg=bid)
+        if bid in centres:  # closed or tube shapes: every face points away from the axis/centre
+            c = tri.mean(axis=1) - np.array(centres[bid])
+            if bid == "D":
+                ax = np.array([0.5, 2.5, 0.0]) / np.linalg.norm([0.5, 2.5, 0.0])
+                c = c - np.outer(c @ ax, ax)
+            assert np.all(np.einsum("ij,ij->i", n, c) > 0), bid
+    from tracer.camera import camera_ray
+
+    cam = ours.camera.packed()
+    for px, py in ((0, 0), (39, 23)):
+        o, d = camera_ray(cam, 40, 24, px, py, 0.5, 0.5)
+        ray, _ = ref.sensors()[0].sample_ray(0.0, 0.5, mi.Point2f((px + 0.5) / 40, (py + 0.5) / 24), mi.Point2f(0.5, 0.5))
+        np.testing.assert_allclose(d, np.array(ray.d), atol=1e-5, err_msg=f"{axis} {px} {py}")

@@ -4,12 +4,15 @@ Materials are a struct of arrays shared with the scene loader and the integrator
 
     mat_type  : (M,) int32, one of the type constants below
     mat_param : (M, N_PARAM) float64, columns [kd_r, kd_g, kd_b, ks_r, ks_g, ks_b, alpha, ior,
-                eta_r, eta_g, eta_b, k_r, k_g, k_b, flags, 0] (P_* below; eta and k: METAL's
-                complex index; flags: ONE_SIDED, BECKMANN)
+                eta_r, eta_g, eta_b, k_r, k_g, k_b, flags, bump scale, clear] (P_* below; eta and k:
+                METAL's complex index; flags: ONE_SIDED, BECKMANN, NONLINEAR; clear = 1 - opacity)
 
 Every function takes the BSDF at one point, `bp = (type, params)`: the type constant and the
-columns above as a tuple, with textures already evaluated there (tracer.material.surface_at
-makes it at a hit; `bsdf_row` from a table row).
+columns above as a tuple, with textures already evaluated there (tracer.material.surface_at makes
+it at a hit, `bsdf_at` from the table, `bsdf_row` from Python). Sampling, eval and pdf also take
+`table`, the scene's (M, tracer.coating.TABLE_RES) COATED transmittance tables (the rough coat
+reads row params[P_TABLE_ROW]); it travels beside bp, not in it, because a tuple that holds an
+array costs a reference count per BSDF at every hit (15% of Cornell's throughput, measured).
 
 Frames and measures
 -------------------
@@ -20,7 +23,7 @@ is the discrete probability of the lobe. What the integrator multiplies into the
 is always `f * |cos wi|` (from `bsdf_eval`) or the sample weight `f * |cos wi| / pdf` (from
 `bsdf_sample`), never a raw 1/pdf.
 
-- DIFFUSE, CONDUCTOR, MIRROR, PLASTIC, METAL are two-sided unless their ONE_SIDED flag is set
+- DIFFUSE, CONDUCTOR, MIRROR, PLASTIC, METAL, COATED are two-sided unless their ONE_SIDED flag is set
   (then black for wo.z <= 0, as Mitsuba's BSDFs without `twosided`): when wo.z < 0 they mirror
   the frame, and reflection requires wo.z * wi.z > 0. THIN_DIELECTRIC is symmetric.
 - DIELECTRIC, ROUGH_DIELECTRIC: wo.z > 0 means wo is outside (index 1), wo.z < 0 inside (index
@@ -34,6 +37,9 @@ G2 and sample visible normals (Heitz 2018, "Sampling the GGX Distribution of Vis
 the rough dielectric follows Walter et al. 2007 ("Microfacet Models for Refraction through
 Rough Surfaces"). METAL is Mitsuba 3's conductor as Mitsuba computes it: separable masking
 G1(wo) G1(wi), GGX sampled by visible normals or Beckmann by D(h) cos (tests/test_mitsuba_bsdfs.py).
+COATED is Mitsuba's plastic / roughplastic (tracer.coating): the smooth one has a delta lobe beside
+its diffuse one, so it is not a delta material (`bsdf_is_delta`) but has one (`bsdf_has_delta`), and
+only the samples flagged delta come from it.
 """
 import math
 
@@ -51,16 +57,20 @@ ROUGH_DIELECTRIC = 4  # GGX rough dielectric (Walter et al. 2007), VNDF sampling
 PLASTIC = 5  # kd / pi + ks * D G / (4 cos_i cos_o), no Fresnel, two-sided
 METAL = 6  # Mitsuba's conductor / roughconductor: complex Fresnel (eta, k) x ks; GGX or Beckmann; delta at alpha 0
 THIN_DIELECTRIC = 7  # Mitsuba's thindielectric: a thin slab, reflection and straight transmission, delta
+COATED = 8  # Mitsuba's plastic (alpha 0: a delta lobe beside the diffuse one) / roughplastic (tracer.coating)
 TYPE_NAMES = ("diffuse", "conductor", "mirror", "dielectric", "rough_dielectric", "plastic", "metal",
-              "thin_dielectric")
+              "thin_dielectric", "coated")
 ALPHA_MIN = 1e-4  # every GGX evaluation clamps alpha to at least this
 
 # Columns of a material's parameters (mat_param[m], the `params` of bp)
-N_PARAM = 16
+N_PARAM = 17
 P_KD, P_KS, P_ALPHA, P_IOR, P_ETA, P_K, P_FLAGS = 0, 3, 6, 7, 8, 11, 14
+P_CLEAR = 16  # 1 - opacity (Mitsuba's `mask`, MTL `d`): the share of light that passes straight through
+P_SPEC_WEIGHT, P_INTERNAL, P_TABLE_ROW = 8, 9, 10  # COATED (in METAL's eta columns): coating.prepare fills them
 # Bits of params[P_FLAGS]
 ONE_SIDED = 1  # reflects only on the side of its normal (Mitsuba's BSDFs unless `twosided`); black behind
-BECKMANN = 2  # the Beckmann distribution (METAL), sampled by D(h) cos (Mitsuba's sample_visible false)
+BECKMANN = 2  # the Beckmann distribution (METAL, COATED), sampled by D(h) cos (Mitsuba's sample_visible false)
+NONLINEAR = 4  # COATED: Mitsuba's `nonlinear` (the internal reflections tint: kd / (1 - kd r_in))
 
 _ZERO3 = (0.0, 0.0, 0.0)
 
@@ -103,17 +113,21 @@ def _scale3(a, s):
 
 
 @jit
-def bsdf_row(mat_type, mat_param, m):
+def bsdf_at(mat_type, mat_param, m):
     """The BSDF of material m as its table row gives it, untextured: (type, params), the form
     every function below takes (tracer.material.surface_at gives the one at a hit point)."""
-    if mat_param.shape[1] < N_PARAM:  # a table of the first eight columns only (tests, old callers)
-        return (mat_type[m], (mat_param[m, 0], mat_param[m, 1], mat_param[m, 2], mat_param[m, 3], mat_param[m, 4],
-                              mat_param[m, 5], mat_param[m, 6], mat_param[m, 7], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                              0.0))
     return (mat_type[m], (mat_param[m, 0], mat_param[m, 1], mat_param[m, 2], mat_param[m, 3], mat_param[m, 4],
                           mat_param[m, 5], mat_param[m, 6], mat_param[m, 7], mat_param[m, 8], mat_param[m, 9],
                           mat_param[m, 10], mat_param[m, 11], mat_param[m, 12], mat_param[m, 13],
-                          mat_param[m, 14], mat_param[m, 15]))
+                          mat_param[m, 14], mat_param[m, 15], mat_param[m, 16]))
+
+
+def bsdf_row(mat_type, mat_param, m, mat_table=None):
+    """bsdf_at from Python (tests): tables of fewer than N_PARAM columns read zeros past them;
+    COATED rows are prepared (tracer.coating.prepare, as build_scene does) unless mat_table is
+    given. Pass bsdf_tables(...) as the functions' `table`."""
+    t, p, _ = _table(mat_type, mat_param, mat_table)
+    return int(t[m]), tuple(float(x) for x in p[m])
 
 
 @jit
@@ -526,8 +540,10 @@ def beckmann_d(h, alpha):
     if h[2] <= 0.0:
         return 0.0
     c2 = h[2] * h[2]
-    t2 = (h[0] * h[0] + h[1] * h[1]) / c2
-    return math.exp(-t2 / (alpha * alpha)) / (math.pi * alpha * alpha * c2 * c2)
+    e = (h[0] * h[0] + h[1] * h[1]) / (c2 * alpha * alpha)
+    if e > 700.0:  # exp(-e) underflows (and c2^2 may too)
+        return 0.0
+    return math.exp(-e) / (math.pi * alpha * alpha * c2 * c2)
 
 
 @jit
@@ -621,6 +637,106 @@ def _metal_eval_pdf(prm, wo, wi):
     return _metal_fcos(prm, w, wl, h, alpha, beck), _metal_pdf_h(w, h, alpha, beck)
 
 
+# --- Mitsuba's plastic and roughplastic: a dielectric coat over a diffuse base -----------------
+@jit
+def _coat_t(table, row, c):
+    """The rough coat's transmittance at cosine c, lerped in its table row (Mitsuba's lerp_gather)."""
+    n = table.shape[1]
+    x = c * (n - 1)
+    i = min(int(x), n - 2)
+    f = x - i
+    return table[row, i] * (1.0 - f) + table[row, i + 1] * f
+
+
+@jit
+def _coat_transmittance(prm, table, c):
+    """Transmittance of the coat at cosine c: 1 - F (smooth), the table's (rough)."""
+    if prm[6] <= 0.0:
+        return 1.0 - fresnel_dielectric(c, prm[7])[0]
+    return _coat_t(table, int(prm[10]), c)
+
+
+@jit
+def _coat_spec_prob(prm, table, c):
+    """Probability that sampling picks the coat's specular lobe at the viewer's cosine c: the
+    reflected share (F, or 1 - t) weighted by params[P_SPEC_WEIGHT], as Mitsuba's plastics."""
+    sw = prm[8]
+    r = 1.0 - _coat_transmittance(prm, table, c)
+    ps = r * sw
+    tot = ps + (1.0 - r) * (1.0 - sw)
+    return ps / tot if tot > 0.0 else 0.0
+
+
+@jit
+def _coat_diffuse(prm, table, ci, co):
+    """The diffuse term f(wo, wi) of the coat (both cosines positive): kd / (1 - r_in) t(ci) t(co)
+    / (pi eta^2), r_in params[P_INTERNAL] (times kd per channel with NONLINEAR)."""
+    eta = prm[7]
+    s = _coat_transmittance(prm, table, ci) * _coat_transmittance(prm, table, co) * INV_PI / (eta * eta)
+    r = prm[9]
+    if int(prm[14]) & NONLINEAR:
+        return (prm[0] / (1.0 - prm[0] * r) * s, prm[1] / (1.0 - prm[1] * r) * s, prm[2] / (1.0 - prm[2] * r) * s)
+    k = s / (1.0 - r)
+    return (prm[0] * k, prm[1] * k, prm[2] * k)
+
+
+@jit
+def _coated_eval_pdf(prm, table, wo, wi):
+    """(f |cos wi|, density) of the coat's non-delta part: diffuse, plus the rough coat's specular
+    lobe ks F D G1 G1 / (4 cos_o) sampled as METAL's."""
+    if wo[2] * wi[2] <= 0.0:
+        return _ZERO3, 0.0
+    w = _upper(wo)
+    wl = _upper(wi)
+    ps = _coat_spec_prob(prm, table, w[2])
+    fc = _scale3(_coat_diffuse(prm, table, w[2], wl[2]), wl[2])
+    pdf = (1.0 - ps) * wl[2] * INV_PI
+    if prm[6] > 0.0:
+        alpha = max(prm[6], ALPHA_MIN)
+        beck = int(prm[14]) & BECKMANN
+        h = normalize((w[0] + wl[0], w[1] + wl[1], w[2] + wl[2]))
+        d = beckmann_d(h, alpha) if beck else ggx_d(h, alpha)
+        g = smith_g1(w, h, alpha, beck) * smith_g1(wl, h, alpha, beck)
+        sc = fresnel_dielectric(dot(w, h), prm[7])[0] * d * g / (4.0 * w[2])
+        fc = (fc[0] + prm[3] * sc, fc[1] + prm[4] * sc, fc[2] + prm[5] * sc)
+        pdf += ps * _metal_pdf_h(w, h, alpha, beck)
+    return fc, pdf
+
+
+@jit
+def _coated_sample(prm, table, wo, u0, u1, u2):
+    if wo[2] == 0.0:
+        return _fail()
+    w = _upper(wo)
+    ps = _coat_spec_prob(prm, table, w[2])
+    sgn = 1.0 if wo[2] > 0.0 else -1.0
+    if u2 < ps:
+        if prm[6] <= 0.0:  # the smooth coat's mirror lobe
+            f = fresnel_dielectric(w[2], prm[7])[0] / ps
+            return (-wo[0], -wo[1], wo[2]), (prm[3] * f, prm[4] * f, prm[5] * f), ps, True
+        alpha = max(prm[6], ALPHA_MIN)
+        if int(prm[14]) & BECKMANN:
+            t2 = -alpha * alpha * math.log(1.0 - u0)
+            c = 1.0 / math.sqrt(1.0 + t2)
+            sn = math.sqrt(max(0.0, 1.0 - c * c))
+            phi = 2.0 * math.pi * u1
+            h = (sn * math.cos(phi), sn * math.sin(phi), c)
+        else:
+            h = sample_ggx_vndf(w, alpha, u0, u1)
+        wl = _reflect(w, h)
+        if dot(w, h) <= 0.0 or wl[2] <= 0.0:
+            return _fail()
+    else:
+        wl = sample_cosine_hemisphere(u0, u1)
+        if wl[2] <= 0.0:
+            return _fail()
+    wi = (wl[0], wl[1], sgn * wl[2])
+    fc, pdf = _coated_eval_pdf(prm, table, wo, wi)
+    if not pdf > 0.0:
+        return _fail()
+    return wi, _scale3(fc, 1.0 / pdf), pdf, False
+
+
 # --- Mitsuba's thin dielectric -------------------------------------------------------------------
 @jit
 def _thin_reflectance(prm, wo):
@@ -632,17 +748,70 @@ def _thin_reflectance(prm, wo):
 
 
 # --- Public interface: dispatch on the material type -------------------------------------------
-@jit
-def bsdf_sample(bp, wo, u0, u1, u2, radiance):
+@jit(inline="always")
+def bsdf_sample(bp, wo, u0, u1, u2, radiance, table):
     """Importance-sample wi for material m given wo (local frame).
 
     u0, u1 pick the direction, u2 the lobe. Returns (wi, weight, pdf, delta):
     wi 3-tuple; weight 3-tuple f |cos wi| / pdf (delta lobes: their discrete weight);
     pdf the solid-angle density of the whole BSDF's sampling at wi (delta lobes: the lobe's
     discrete probability); delta True when wi came from a delta lobe. A failed sample returns
-    wi = weight = (0, 0, 0), pdf 0, delta False.
+    wi = weight = (0, 0, 0), pdf 0, delta False. A material with clear = params[P_CLEAR] > 0 (an
+    opacity mask) passes straight through with probability clear (weight 1, a delta lobe) and
+    scatters by its BSDF otherwise (u2 rescaled; densities times 1 - clear).
     """
-    t, prm = bp
+    c = bp[1][16]
+    if c > 0.0:
+        if u2 < c:
+            if wo[2] == 0.0:
+                return _fail()
+            return (-wo[0], -wo[1], -wo[2]), (1.0, 1.0, 1.0), c, True
+        wi, wt, pdf, dlt = _sample_opaque(bp, wo, u0, u1, min((u2 - c) / (1.0 - c), 1.0 - 1e-12), radiance, table)
+        return wi, wt, pdf * (1.0 - c), dlt
+    return _sample_opaque(bp, wo, u0, u1, u2, radiance, table)
+
+
+@jit(inline="always")
+def bsdf_eval(bp, wo, wi, radiance, table):
+    """f(wo, wi) |cos wi| as a 3-tuple (local frame), times the opacity; (0, 0, 0) for delta
+    materials."""
+    c = bp[1][16]
+    if c > 0.0:
+        return _scale3(_eval_opaque(bp, wo, wi, radiance, table), 1.0 - c)
+    return _eval_opaque(bp, wo, wi, radiance, table)
+
+
+@jit(inline="always")
+def bsdf_pdf(bp, wo, wi, table):
+    """Solid-angle density with which `bsdf_sample` produces wi; 0 for delta materials."""
+    c = bp[1][16]
+    if c > 0.0:
+        return _pdf_opaque(bp, wo, wi, table) * (1.0 - c)
+    return _pdf_opaque(bp, wo, wi, table)
+
+
+@jit
+def delta_lobe(bp, wo, transmit, radiance):
+    """The delta lobe of material m that reflects wo (transmit False) or refracts it (True), as
+    bsdf_sample would pick it: (wi, value f |cos| in the discrete measure, probability that
+    bsdf_sample picks this lobe). Probability 0 where there is no such lobe (a material that is not
+    delta, total internal reflection, a grazing wo). With an opacity mask, the transmitted lobe is
+    the straight pass (value and probability clear) and a reflected one is scaled by 1 - clear."""
+    c = bp[1][16]
+    if c > 0.0:
+        if transmit:
+            if wo[2] == 0.0:
+                return _ZERO3, _ZERO3, 0.0
+            return (-wo[0], -wo[1], -wo[2]), (c, c, c), c
+        wi, val, prob = _delta_lobe_opaque(bp, wo, False, radiance)
+        return wi, _scale3(val, 1.0 - c), prob * (1.0 - c)
+    return _delta_lobe_opaque(bp, wo, transmit, radiance)
+
+
+@jit
+def _sample_opaque(bp, wo, u0, u1, u2, radiance, table):
+    """bsdf_sample without the opacity mask."""
+    t, prm = bp[0], bp[1]
     if prm[14] != 0.0 and int(prm[14]) & ONE_SIDED and wo[2] <= 0.0:
         return _fail()
     if t == DIFFUSE:
@@ -663,6 +832,8 @@ def bsdf_sample(bp, wo, u0, u1, u2, radiance):
         )
     if t == METAL:
         return _metal_sample(prm, wo, u0, u1)
+    if t == COATED:
+        return _coated_sample(prm, table, wo, u0, u1, u2)
     if t == THIN_DIELECTRIC:
         if wo[2] == 0.0:
             return _fail()
@@ -674,9 +845,9 @@ def bsdf_sample(bp, wo, u0, u1, u2, radiance):
 
 
 @jit
-def bsdf_eval(bp, wo, wi, radiance):
-    """f(wo, wi) |cos wi| as a 3-tuple (local frame); (0, 0, 0) for delta materials."""
-    t, prm = bp
+def _eval_opaque(bp, wo, wi, radiance, table):
+    """bsdf_eval without the opacity mask."""
+    t, prm = bp[0], bp[1]
     if prm[14] != 0.0 and int(prm[14]) & ONE_SIDED and wo[2] <= 0.0:
         return _ZERO3
     if t == DIFFUSE:
@@ -696,13 +867,16 @@ def bsdf_eval(bp, wo, wi, radiance):
     if t == METAL:
         fcos, _ = _metal_eval_pdf(prm, wo, wi)
         return fcos
+    if t == COATED:
+        fcos, _ = _coated_eval_pdf(prm, table, wo, wi)
+        return fcos
     return _ZERO3
 
 
 @jit
-def bsdf_pdf(bp, wo, wi):
-    """Solid-angle density with which `bsdf_sample` produces wi; 0 for delta materials."""
-    t, prm = bp
+def _pdf_opaque(bp, wo, wi, table):
+    """bsdf_pdf without the opacity mask."""
+    t, prm = bp[0], bp[1]
     if prm[14] != 0.0 and int(prm[14]) & ONE_SIDED and wo[2] <= 0.0:
         return 0.0
     if t == DIFFUSE:
@@ -720,6 +894,9 @@ def bsdf_pdf(bp, wo, wi):
     if t == METAL:
         _, pdf = _metal_eval_pdf(prm, wo, wi)
         return pdf
+    if t == COATED:
+        _, pdf = _coated_eval_pdf(prm, table, wo, wi)
+        return pdf
     return 0.0
 
 
@@ -727,8 +904,16 @@ def bsdf_pdf(bp, wo, wi):
 def bsdf_is_delta(bp):
     """True for materials that only scatter into discrete directions (MIRROR, DIELECTRIC,
     THIN_DIELECTRIC, METAL with alpha 0)."""
-    t, prm = bp
+    t, prm = bp[0], bp[1]
     return t == MIRROR or t == DIELECTRIC or t == THIN_DIELECTRIC or (t == METAL and prm[6] <= 0.0)
+
+
+@jit
+def bsdf_has_delta(bp):
+    """True for materials with a delta lobe: the delta materials, the smooth COATED (its mirror lobe
+    beside the diffuse one) and every material with an opacity mask (its straight pass);
+    bsdf_sample flags the samples it draws from them."""
+    return bsdf_is_delta(bp) or (bp[0] == COATED and bp[1][6] <= 0.0) or bp[1][16] > 0.0
 
 
 @jit
@@ -736,23 +921,20 @@ def bsdf_roughness(bp):
     """The smallest roughness of material m's lobes (the gradient-domain tracer's hybrid shift
     reconnects only between rough vertices): inf for diffuse, the GGX alpha for conductor, rough
     dielectric and plastic (its specular lobe), 0 for the delta materials."""
-    t, prm = bp
+    t, prm = bp[0], bp[1]
     if t == DIFFUSE:
         return math.inf
     if t == CONDUCTOR or t == ROUGH_DIELECTRIC or t == PLASTIC:
         return _alpha(prm)
-    if t == METAL and prm[6] > 0.0:
+    if (t == METAL or t == COATED) and prm[6] > 0.0:
         return _alpha(prm)
     return 0.0
 
 
 @jit
-def delta_lobe(bp, wo, transmit, radiance):
-    """The delta lobe of material m that reflects wo (transmit False) or refracts it (True), as
-    bsdf_sample would pick it: (wi, value f |cos| in the discrete measure, probability that
-    bsdf_sample picks this lobe). Probability 0 where there is no such lobe (a material that is not
-    delta, total internal reflection, a grazing wo)."""
-    t, prm = bp
+def _delta_lobe_opaque(bp, wo, transmit, radiance):
+    """delta_lobe without the opacity mask."""
+    t, prm = bp[0], bp[1]
     if wo[2] == 0.0:
         return _ZERO3, _ZERO3, 0.0
     if prm[14] != 0.0 and int(prm[14]) & ONE_SIDED and wo[2] < 0.0:
@@ -765,6 +947,13 @@ def delta_lobe(bp, wo, transmit, radiance):
         if transmit:
             return _ZERO3, _ZERO3, 0.0
         return (-wo[0], -wo[1], wo[2]), _metal_f(prm, abs(wo[2])), 1.0
+    if t == COATED and prm[6] <= 0.0:
+        if transmit:
+            return _ZERO3, _ZERO3, 0.0
+        f = fresnel_dielectric(abs(wo[2]), prm[7])[0]
+        ps = f * prm[8]
+        tot = ps + (1.0 - f) * (1.0 - prm[8])  # _coat_spec_prob of the smooth coat
+        return (-wo[0], -wo[1], wo[2]), (prm[3] * f, prm[4] * f, prm[5] * f), ps / tot if tot > 0.0 else 0.0
     if t == THIN_DIELECTRIC:
         r = _thin_reflectance(prm, wo)
         if transmit:
@@ -786,10 +975,10 @@ def delta_lobe(bp, wo, transmit, radiance):
 
 @jit
 def bsdf_albedo(bp):
-    """A cheap albedo 3-tuple for the AOV: kd; ks (metals; METAL: ks x its normal-incidence Fresnel);
+    """A cheap albedo 3-tuple for the AOV: kd (diffuse, coated); ks (metals; METAL: ks x its normal-incidence Fresnel);
     min(kd + ks, 1) (plastic); 1 (glass)."""
-    t, prm = bp
-    if t == DIFFUSE:
+    t, prm = bp[0], bp[1]
+    if t == DIFFUSE or t == COATED:
         return _kd(prm)
     if t == CONDUCTOR or t == MIRROR:
         return _ks(prm)
@@ -807,14 +996,45 @@ def bsdf_albedo(bp):
 
 
 # --- Batch kernels (tests, experiments) ----------------------------------------------------------
-@kernel
-def sample_batch(mat_type, mat_param, m, wo, u, radiance):
+def _table(mat_type, mat_param, mat_table):
+    """The (type, N_PARAM columns, tables) a batch kernel reads: rows padded with zeros, COATED rows
+    prepared (tracer.coating.prepare) unless mat_table is given."""
+    from .coating import prepare
+
+    p = np.zeros((len(mat_type), N_PARAM))
+    p[:, : np.shape(mat_param)[1]] = mat_param
+    if mat_table is None:
+        p, mat_table = prepare(mat_type, p)
+    return np.asarray(mat_type, dtype=np.int32), p, np.ascontiguousarray(mat_table, dtype=np.float64)
+
+
+def bsdf_tables(mat_type, mat_param):
+    """The COATED tables of a material table, as build_scene makes them (tests: the `table` argument)."""
+    return _table(mat_type, mat_param, None)[2]
+
+
+def sample_batch(mat_type, mat_param, m, wo, u, radiance, mat_table=None):
     """`bsdf_sample` over a batch, all with material m.
 
     wo : (n, 3) float64 local directions; u : (n, 3) float64 in [0, 1) (u0, u1 direction, u2 lobe).
     Returns wi (n, 3) float64, weight (n, 3) float64, pdf (n,) float64 (solid angle, or the lobe
     probability where delta), delta (n,) bool.
     """
+    return _sample_batch(*_table(mat_type, mat_param, mat_table), m, wo, u, radiance)
+
+
+def eval_batch(mat_type, mat_param, m, wo, wi, radiance, mat_table=None):
+    """`bsdf_eval` over a batch: wo, wi (n, 3) float64 local -> f |cos wi| (n, 3) float64."""
+    return _eval_batch(*_table(mat_type, mat_param, mat_table), m, wo, wi, radiance)
+
+
+def pdf_batch(mat_type, mat_param, m, wo, wi, mat_table=None):
+    """`bsdf_pdf` over a batch: wo, wi (n, 3) float64 local -> solid-angle pdf (n,) float64."""
+    return _pdf_batch(*_table(mat_type, mat_param, mat_table), m, wo, wi)
+
+
+@kernel
+def _sample_batch(mat_type, mat_param, mat_table, m, wo, u, radiance):
     n = wo.shape[0]
     wi = np.empty((n, 3))
     beta = np.empty((n, 3))
@@ -822,8 +1042,8 @@ def sample_batch(mat_type, mat_param, m, wo, u, radiance):
     delta = np.empty(n, dtype=np.bool_)
     for k in prange(n):
         w, b, p, d = bsdf_sample(
-            bsdf_row(mat_type, mat_param, m), (wo[k, 0], wo[k, 1], wo[k, 2]), u[k, 0], u[k, 1], u[k, 2],
-            radiance,
+            bsdf_at(mat_type, mat_param, m), (wo[k, 0], wo[k, 1], wo[k, 2]), u[k, 0], u[k, 1],
+            u[k, 2], radiance, mat_table,
         )
         for c in range(3):
             wi[k, c] = w[c]
@@ -834,14 +1054,13 @@ def sample_batch(mat_type, mat_param, m, wo, u, radiance):
 
 
 @kernel
-def eval_batch(mat_type, mat_param, m, wo, wi, radiance):
-    """`bsdf_eval` over a batch: wo, wi (n, 3) float64 local -> f |cos wi| (n, 3) float64."""
+def _eval_batch(mat_type, mat_param, mat_table, m, wo, wi, radiance):
     n = wo.shape[0]
     out = np.empty((n, 3))
     for k in prange(n):
         f = bsdf_eval(
-            bsdf_row(mat_type, mat_param, m), (wo[k, 0], wo[k, 1], wo[k, 2]), (wi[k, 0], wi[k, 1], wi[k, 2]),
-            radiance,
+            bsdf_at(mat_type, mat_param, m), (wo[k, 0], wo[k, 1], wo[k, 2]),
+            (wi[k, 0], wi[k, 1], wi[k, 2]), radiance, mat_table,
         )
         for c in range(3):
             out[k, c] = f[c]
@@ -849,12 +1068,12 @@ def eval_batch(mat_type, mat_param, m, wo, wi, radiance):
 
 
 @kernel
-def pdf_batch(mat_type, mat_param, m, wo, wi):
-    """`bsdf_pdf` over a batch: wo, wi (n, 3) float64 local -> solid-angle pdf (n,) float64."""
+def _pdf_batch(mat_type, mat_param, mat_table, m, wo, wi):
     n = wo.shape[0]
     out = np.empty(n)
     for k in prange(n):
         out[k] = bsdf_pdf(
-            bsdf_row(mat_type, mat_param, m), (wo[k, 0], wo[k, 1], wo[k, 2]), (wi[k, 0], wi[k, 1], wi[k, 2])
+            bsdf_at(mat_type, mat_param, m), (wo[k, 0], wo[k, 1], wo[k, 2]), (wi[k, 0], wi[k, 1], wi[k, 2]),
+            mat_table,
         )
     return out

@@ -49,7 +49,7 @@ class RenderContext:
         tex = scene.textures
         self.surfaces = Surfaces(tri, self.tri_normal, scene.tri_material, self.tri_eps, scene.materials.type,
                                  scene.materials.param, scene.tri_uv, scene.tri_vn, scene.materials.tex, tex.info,
-                                 tex.data)
+                                 tex.data, scene.materials.table)
         self.n_pixels = int(self.crop[2] * self.crop[3])
         self.guide_state = empty_state()
 

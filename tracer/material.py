@@ -4,7 +4,7 @@
 tracer's shade, NEE, the photon tracer's scatter, the gradient-domain offsets, the records and
 AOVs): it evaluates the material's textures at the point's UV and builds the shading frame from
 the interpolated vertex normals. It returns a Surface: the BSDF at the point, `bp = (type,
-params)` as tracer.bsdfs takes it, and the frame (s, t, ns) in which its local directions live.
+params)` as tracer.bsdfs takes it (with `table`, the scene's coat tables), and the frame (s, t, ns) in which its local directions live.
 
 Normals: `ng` (the triangle's geometric normal, counter-clockwise side) decides sides (one-sided
 emission, which side a ray is offset to, light leaks); `ns`, the interpolated vertex normal
@@ -26,7 +26,9 @@ first mapped by the affine (u', v') = (a u + b v + c, d u + e v + f). UVs follow
 convention: v grows upward in the image, so texel row = (1 - v') height.
 
 `mat_tex[m]` names the texture of each slot of material m (TEX_SLOT_KD, TEX_SLOT_KS,
-TEX_SLOT_BUMP; -1: none): a kd or ks texture replaces the matching params; a bump texture is a
+TEX_SLOT_BUMP, TEX_SLOT_OPACITY; -1: none): a kd or ks texture replaces the matching params, an
+opacity texture (its Rec. 709 luminance, clamped to [0, 1]) sets params[P_CLEAR] = 1 - opacity
+(tracer.bsdfs: the share that passes straight through); a bump texture is a
 height field h(u, v) (its Rec. 709 luminance) that tilts the shading normal as Mitsuba 3's
 `bumpmap` does: with g = params[P_BUMP_SCALE] x grad h, the surface's dp/du and dp/dv get g_u,
 g_v as their components along the normal, and the new normal is their cross product, turned into
@@ -38,12 +40,12 @@ from typing import NamedTuple
 import numpy as np
 
 from ._jit import jit
-from .bsdfs import bsdf_row
+from .bsdfs import bsdf_at
 from .sampling import dot, frame
 
 TEX_CONSTANT, TEX_BITMAP, TEX_CHECKER = 0, 1, 2
-TEX_SLOT_KD, TEX_SLOT_KS, TEX_SLOT_BUMP = 0, 1, 2
-N_TEX_SLOTS = 3
+TEX_SLOT_KD, TEX_SLOT_KS, TEX_SLOT_BUMP, TEX_SLOT_OPACITY = 0, 1, 2, 3
+N_TEX_SLOTS = 4
 P_BUMP_SCALE = 15  # the params column of a bump-mapped material's height scale
 TEX_INFO_COLS = 16
 
@@ -62,6 +64,7 @@ class Surfaces(NamedTuple):
     mat_tex: np.ndarray  # (M, N_TEX_SLOTS) int32 texture of each slot (-1: none)
     tex_info: np.ndarray  # (T, TEX_INFO_COLS) float64, the module docstring's rows
     tex_data: np.ndarray  # (texels * 3,) float32 linear RGB of every bitmap
+    mat_table: np.ndarray  # (M, coating.TABLE_RES) float64 the COATED materials' transmittance tables
 
 
 class Surface(NamedTuple):
@@ -229,23 +232,29 @@ def surface_at(surf, p, b1, b2):
     """The Surface of triangle p at barycentrics (b1, b2): its BSDF with textures evaluated, and
     its shading frame."""
     m = surf.material[p]
-    bp = bsdf_row(surf.mat_type, surf.mat_param, m)
+    bp = bsdf_at(surf.mat_type, surf.mat_param, m)
     ng = (surf.normal[p, 0], surf.normal[p, 1], surf.normal[p, 2])
     uv = (0.0, 0.0)
     textured = surf.tex_info.shape[0] > 0 and (surf.mat_tex[m, TEX_SLOT_KD] >= 0 or surf.mat_tex[m, TEX_SLOT_KS] >= 0
-                                              or surf.mat_tex[m, TEX_SLOT_BUMP] >= 0)
+                                              or surf.mat_tex[m, TEX_SLOT_BUMP] >= 0
+                                              or surf.mat_tex[m, TEX_SLOT_OPACITY] >= 0)
     if textured:
         uv = surface_uv(surf, p, b1, b2)
-    if textured and (surf.mat_tex[m, TEX_SLOT_KD] >= 0 or surf.mat_tex[m, TEX_SLOT_KS] >= 0):
-        t, prm = bp
+    if textured and (surf.mat_tex[m, TEX_SLOT_KD] >= 0 or surf.mat_tex[m, TEX_SLOT_KS] >= 0
+                     or surf.mat_tex[m, TEX_SLOT_OPACITY] >= 0):
+        t, prm = bp[0], bp[1]
         kd = (prm[0], prm[1], prm[2])
         ks = (prm[3], prm[4], prm[5])
+        clear = prm[16]
         if surf.mat_tex[m, TEX_SLOT_KD] >= 0:
             kd = texture_eval(surf.tex_info, surf.tex_data, surf.mat_tex[m, TEX_SLOT_KD], uv[0], uv[1])
         if surf.mat_tex[m, TEX_SLOT_KS] >= 0:
             ks = texture_eval(surf.tex_info, surf.tex_data, surf.mat_tex[m, TEX_SLOT_KS], uv[0], uv[1])
+        if surf.mat_tex[m, TEX_SLOT_OPACITY] >= 0:
+            op = _lum(texture_eval(surf.tex_info, surf.tex_data, surf.mat_tex[m, TEX_SLOT_OPACITY], uv[0], uv[1]))
+            clear = 1.0 - min(max(op, 0.0), 1.0)
         bp = (t, (kd[0], kd[1], kd[2], ks[0], ks[1], ks[2], prm[6], prm[7], prm[8], prm[9], prm[10], prm[11],
-                  prm[12], prm[13], prm[14], prm[15]))
+                  prm[12], prm[13], prm[14], prm[15], clear))
     ns = shading_normal(surf, p, b1, b2, ng)
     smooth = surf.vn.shape[0] > 0
     if textured and surf.mat_tex[m, TEX_SLOT_BUMP] >= 0 and surf.uv.shape[0] > 0:

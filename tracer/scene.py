@@ -35,6 +35,7 @@ class Materials:
     param: np.ndarray  # (M, bsdfs.N_PARAM) float64: kd rgb, ks rgb, alpha, ior, eta rgb, k rgb, flags
     emission: np.ndarray  # (M, 3) float64 radiance, one-sided
     tex: np.ndarray = None  # (M, N_TEX_SLOTS) int32 texture of each slot (kd, ks, bump; -1: none), tracer.material
+    table: np.ndarray = None  # (M, coating.TABLE_RES) float64 COATED transmittance tables (tracer.coating.prepare)
 
     def __repr__(self):
         kinds = [bsdfs.TYPE_NAMES[t] for t in self.type]
@@ -232,6 +233,27 @@ def _padded(param):
     return out
 
 
+def prepare_coats(materials, textures):
+    """Fill the COATED rows' derived columns and tables (tracer.coating.prepare), sampling weights
+    from the textured reflectances' means as Mitsuba computes them. build_scene calls it; call it
+    again after changing a scene's materials or textures."""
+    from .coating import TABLE_RES, prepare
+    from .material import TEX_SLOT_KD, TEX_SLOT_KS
+
+    coated = materials.type == bsdfs.COATED
+    if not coated.any():
+        materials.table = np.zeros((len(materials.type), TABLE_RES))
+        return
+    kd = materials.param[:, bsdfs.P_KD:bsdfs.P_KD + 3].mean(axis=1)
+    ks = materials.param[:, bsdfs.P_KS:bsdfs.P_KS + 3].mean(axis=1)
+    for m in np.flatnonzero(coated):
+        if materials.tex[m, TEX_SLOT_KD] >= 0:
+            kd[m] = textures.mean(materials.tex[m, TEX_SLOT_KD]).mean()
+        if materials.tex[m, TEX_SLOT_KS] >= 0:
+            ks[m] = textures.mean(materials.tex[m, TEX_SLOT_KS]).mean()
+    materials.param, materials.table = prepare(materials.type, materials.param, kd, ks)
+
+
 def _load_mitsuba(path, before_framing, overrides):
     """load_scene for a Mitsuba scene XML (tracer.readers.mitsuba), with the keyword overrides."""
     from .readers.mitsuba import read_mitsuba_scene
@@ -300,6 +322,7 @@ def build_scene(spec, before_framing=None):
         tri_vn=np.ascontiguousarray(vn, dtype=np.float64) if vn is not None else np.zeros((0, 3, 3)),
         textures=build_textures(spec.textures, spec.warnings),
     )
+    prepare_coats(scene.materials, scene.textures)
     env = spec.environment
     has_env = env is not None and (env.image is not None or env.radiance.max() > 0)
     if not scene.emissive.any() and not has_env:

@@ -11,7 +11,8 @@ guide mixture exist once:
     russian_roulette                continue or end, on the throughput BSDF sampling would have had
     next_bounce                     the two together, with their random numbers: a path's next step
 
-Conventions: directions are unit 3-tuples; `wo`, `wi` in the local shading frame (s, t, ns) of
+Conventions: `table` is the scene's COATED tables (material.Surfaces.mat_table, tracer.bsdfs);
+directions are unit 3-tuples; `wo`, `wi` in the local shading frame (s, t, ns) of
 the point's tracer.material.Surface `sf` unless named `*w` (world); `ng` is the true (geometric)
 normal, `cos_o` the world wo's cosine with it (sides, ray offsets and the light-leak test
 material.crosses); densities are per unit solid angle; colours are RGB 3-tuples. `a` is the probability of BSDF sampling in the mixture p = a p_bsdf + (1 - a) p_guide
@@ -145,18 +146,18 @@ def mixture_pdf(gs, slot, a, pb, wiw):
 
 
 @jit(inline="always")
-def next_event(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1):
+def next_event(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1, table):
     """Next-event estimation at a non-delta vertex x (Surface sf, geometric normal ng, outgoing wo
     local), path throughput beta: one light sample (u_light, u_pos0, u_pos1), MIS-weighted by
     the power heuristic against the mixture density of the same direction. Returns (ok, origin,
     unit direction, tmax, contribution beta f le w / p_light): the shadow ray to trace, and what it
     adds if unblocked. ok is False where nothing is to be traced."""
-    ls = light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1)
+    ls = light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1, table)
     return ls.ok, ls.origin, ls.direction, ls.tmax, ls.contrib
 
 
 @jit(inline="always")
-def light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1):
+def light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1, table):
     """next_event with the light sample itself, as a LightSample. The gradient-domain tracer shifts
     this sample to its offset paths."""
     wl, dist, le, pl, lt_tri = sample_light(lt, tri, x, u_light, u_pos0, u_pos1)
@@ -169,10 +170,10 @@ def light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_e
     pb = 0.0
     if pl > 0.0 and (le[0] > 0.0 or le[1] > 0.0 or le[2] > 0.0):
         wil = to_local(wl, sf.s, sf.t, sf.ns)
-        f = bsdfs.bsdf_eval(sf.bp, wo, wil, True)
+        f = bsdfs.bsdf_eval(sf.bp, wo, wil, True, table)
         if crosses(sf, cos_o, ng, wo, wil, wl):
             f = BLACK
-        pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(sf.bp, wo, wil), wl)
+        pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(sf.bp, wo, wil, table), wl)
         if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
             w = power_heuristic(pl, pb)
             so, sd, tmax = shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps)
@@ -184,19 +185,19 @@ def light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_e
 
 
 @jit(inline="always")
-def sample_mixture(sf, gs, slot, a, wo, ng, cos_o, u0, u1, u_lobe, u_strategy):
+def sample_mixture(sf, gs, slot, a, wo, ng, cos_o, u0, u1, u_lobe, u_strategy, table):
     """Sample the continuation from the mixture (sampleMat): the guide's map `slot` with probability
     1 - a (u_strategy >= a), else the BSDF (u_lobe picks its lobe); u0, u1 the direction.
     Returns (wiw world direction, weight f cos / pdf (RGB), pdf of the mixture, p_bsdf of wiw, delta
-    (sampled a delta lobe: pdf is then the lobe's probability), strategy 0 BSDF / 1 guide, ratio
-    p_bsdf / pdf (1 without a guide, or at a delta lobe))."""
+    (sampled a delta lobe: pdf is then the probability of picking it, a x the lobe's), strategy 0
+    BSDF / 1 guide, ratio p_bsdf / pdf (1 without a guide))."""
     if a < 1.0 and u_strategy >= a:
         wiw, pg = slot_sample(gs, slot, u0, u1)
         wi = to_local(wiw, sf.s, sf.t, sf.ns)
-        f = bsdfs.bsdf_eval(sf.bp, wo, wi, True)
+        f = bsdfs.bsdf_eval(sf.bp, wo, wi, True, table)
         if crosses(sf, cos_o, ng, wo, wi, wiw):
             f = BLACK
-        pbs = bsdfs.bsdf_pdf(sf.bp, wo, wi)
+        pbs = bsdfs.bsdf_pdf(sf.bp, wo, wi, table)
         pdf = a * pbs + (1.0 - a) * pg
         wt = BLACK
         ratio = 1.0
@@ -205,14 +206,16 @@ def sample_mixture(sf, gs, slot, a, wo, ng, cos_o, u0, u1, u_lobe, u_strategy):
             wt = (f[0] * inv, f[1] * inv, f[2] * inv)
             ratio = pbs * inv
         return wiw, wt, pdf, pbs, False, 1, ratio
-    wi, wt, pdf, dlt = bsdfs.bsdf_sample(sf.bp, wo, u0, u1, u_lobe, True)
+    wi, wt, pdf, dlt = bsdfs.bsdf_sample(sf.bp, wo, u0, u1, u_lobe, True, table)
     wiw = to_world(wi, sf.s, sf.t, sf.ns)
     if crosses(sf, cos_o, ng, wo, wi, wiw):
         wt = BLACK
     pbs = pdf
     ratio = 1.0
-    if a < 1.0 and pdf > 0.0 and not dlt:
-        pm = mixture_pdf(gs, slot, a, pdf, wiw)
+    if a < 1.0 and pdf > 0.0:
+        # a delta lobe (of a material that also has a smooth one) is chosen with probability a x its
+        # own; the guide never produces its direction
+        pm = a * pdf if dlt else mixture_pdf(gs, slot, a, pdf, wiw)
         ratio = pdf / pm
         wt = (wt[0] * ratio, wt[1] * ratio, wt[2] * ratio)
         pdf = pm
@@ -248,7 +251,7 @@ class NextBounce(NamedTuple):
 
 
 @jit(inline="always")
-def next_bounce(sf, gs, slot, a, wo, ng, cos_o, beta, gain, depth, rr_depth, max_bounces, ps, key, row):
+def next_bounce(sf, gs, slot, a, wo, ng, cos_o, beta, gain, depth, rr_depth, max_bounces, ps, key, row, table):
     """A path's next step at a vertex with Surface sf (geometric normal ng, cos_o; outgoing wo local) after
     `depth` bounces, with throughput beta and gain so far: the direction from the mixture of the
     guide's map `slot` (probability 1 - a) and the BSDF, its random numbers drawn for path `row`
@@ -258,7 +261,7 @@ def next_bounce(sf, gs, slot, a, wo, ng, cos_o, beta, gain, depth, rr_depth, max
     u_lobe = 0.0 if a < 1.0 and u_strategy >= a else draw(ps, key, row, bounce_dim(depth, LOBE))  # BSDF only
     wiw, wt, pdf, pbs, dlt, strategy, ratio = sample_mixture(
         sf, gs, slot, a, wo, ng, cos_o, draw(ps, key, row, bounce_dim(depth, DIR)),
-        draw(ps, key, row, bounce_dim(depth, DIR + 1)), u_lobe, u_strategy)
+        draw(ps, key, row, bounce_dim(depth, DIR + 1)), u_lobe, u_strategy, table)
     gn = gain * ratio
     nb = (beta[0] * wt[0], beta[1] * wt[1], beta[2] * wt[2])
     bmax = max(nb[0], max(nb[1], nb[2]))

@@ -51,6 +51,16 @@ class Textures:
     def __len__(self):
         return self.info.shape[0]
 
+    def mean(self, k):
+        """Mean RGB of texture k over its texels (a checkerboard: of its two colours)."""
+        row = self.info[k]
+        if row[0] == TEX_CHECKER:
+            return 0.5 * (row[10:13] + row[13:16])
+        if row[0] == TEX_BITMAP:
+            o, w, h = (int(v) for v in row[1:4])
+            return self.data[o:o + w * h * 3].reshape(-1, 3).mean(axis=0, dtype=np.float64)
+        return row[10:13].copy()
+
 
 def srgb_decode(x):
     """sRGB-encoded [0, 1] -> linear (IEC 61966-2-1)."""

@@ -17,6 +17,7 @@ MAT_PARAM = np.array([[0, 0, 0, 0.9, 0.8, 0.7, 0.3, 0],
                       [0.5, 0.4, 0.3, 0.2, 0.2, 0.2, 0.2, 0],
                       [0, 0, 0, 0.9, 0.9, 0.9, 0, 0],
                       [0, 0, 0, 0, 0, 0, 0, 1.5]], np.float64)
+NO_TABLE = bsdfs.bsdf_tables(MAT_TYPE, MAT_PARAM)  # (no coated material: zeros)
 
 
 def _bp(m):
@@ -37,7 +38,7 @@ def _configurations(m, transmit, rng, count):
         wo_b = _unit(rng.normal(size=3))
         if m not in (1, 4):
             wo_b = (wo_b[0], wo_b[1], abs(wo_b[2]))
-        wi_b, _, pdf, _ = bsdfs.bsdf_sample(_bp(m), wo_b, *rng.random(3), True)
+        wi_b, _, pdf, _ = bsdfs.bsdf_sample(_bp(m), wo_b, *rng.random(3), True, NO_TABLE)
         if not pdf > 0 or (wo_b[2] * wi_b[2] < 0) != transmit:
             continue
         wo_o = _unit(np.asarray(wo_b) + 0.3 * rng.normal(size=3))
@@ -62,13 +63,13 @@ def test_half_vector_shift_is_its_own_inverse(m, transmit, delta):
     rng = np.random.default_rng(m * 10 + transmit)
     tried = 0
     for wo_b, wi_b, wo_o in _configurations(m, transmit, rng, 40):
-        ok, wi_o, _, pdf, jac = half_vector_shift(_bp(m), _bp(m), wo_b, wi_b, wo_o, delta)
+        ok, wi_o, _, pdf, jac = half_vector_shift(_bp(m), _bp(m), wo_b, wi_b, wo_o, delta, NO_TABLE)
         if not ok:  # total internal reflection of the offset: a failed shift, checked below
             continue
         tried += 1
         assert pdf > 0 and jac > 0
         assert (wo_o[2] * wi_o[2] < 0) == transmit
-        ok2, back, _, _, jac2 = half_vector_shift(_bp(m), _bp(m), wo_o, wi_o, wo_b, delta)
+        ok2, back, _, _, jac2 = half_vector_shift(_bp(m), _bp(m), wo_o, wi_o, wo_b, delta, NO_TABLE)
         assert ok2
         np.testing.assert_allclose(back, wi_b, atol=1e-9)
         assert jac * jac2 == pytest.approx(1.0, rel=1e-9)
@@ -103,12 +104,12 @@ def test_half_vector_jacobian_matches_finite_differences(m, transmit):
     by the |H|^2 ratio: tens of percent here) or one without the eta_t^2 of its side."""
     rng = np.random.default_rng(7 + m + transmit)
     for wo_b, wi_b, wo_o in _configurations(m, transmit, rng, 15):
-        ok, _, _, _, jac = half_vector_shift(_bp(m), _bp(m), wo_b, wi_b, wo_o, False)
+        ok, _, _, _, jac = half_vector_shift(_bp(m), _bp(m), wo_b, wi_b, wo_o, False, NO_TABLE)
         if not ok:
             continue
 
         def shifted(w):
-            good, wi, _, _, _ = half_vector_shift(_bp(m), _bp(m), wo_b, tuple(w), wo_o, False)
+            good, wi, _, _, _ = half_vector_shift(_bp(m), _bp(m), wo_b, tuple(w), wo_o, False, NO_TABLE)
             assert good
             return wi
 
@@ -140,13 +141,13 @@ def test_a_delta_lobe_shifts_only_to_a_delta_lobe():
     a refraction that becomes total internal reflection at the offset fails: each is a failed
     shift (ok False), which the kernel turns into a zero offset contribution."""
     wo, wi = _unit([0.3, 0.1, 0.9]), _unit([-0.3, -0.1, 0.9])
-    assert not half_vector_shift(_bp(3), _bp(0), wo, wi, wo, True)[0]
-    assert not half_vector_shift(_bp(0), _bp(3), wo, wi, wo, False)[0]
+    assert not half_vector_shift(_bp(3), _bp(0), wo, wi, wo, True, NO_TABLE)[0]
+    assert not half_vector_shift(_bp(0), _bp(3), wo, wi, wo, False, NO_TABLE)[0]
     # From inside the glass: a steep base refracts out, a grazing offset is totally reflected
     wo_b = _unit([0.1, 0.0, -1.0])
-    wi_b, _, pdf, _ = bsdfs.bsdf_sample(_bp(4), wo_b, 0.5, 0.5, 0.99, True)
+    wi_b, _, pdf, _ = bsdfs.bsdf_sample(_bp(4), wo_b, 0.5, 0.5, 0.99, True, NO_TABLE)
     assert pdf > 0 and wi_b[2] > 0
-    assert not half_vector_shift(_bp(4), _bp(4), wo_b, tuple(wi_b), _unit([0.9, 0.0, -0.3]), True)[0]
+    assert not half_vector_shift(_bp(4), _bp(4), wo_b, tuple(wi_b), _unit([0.9, 0.0, -0.3]), True, NO_TABLE)[0]
 
 
 @pytest.mark.parametrize("name,roughness", [("ajar", 0.001), ("caustic", 0.001), ("cornell", math.inf),

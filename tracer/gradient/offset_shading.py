@@ -175,7 +175,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
             ls = light_sample_at(
                 sf, lt, surf.tri, x, ng, cos_o, wo, b, gs, slot, a, surf.eps[p], surf.eps,
                 draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
-                draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)))
+                draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)), surf.mat_table)
             ok, so, sd, tmax, contrib = ls.ok, ls.origin, ls.direction, ls.tmax, ls.contrib
             wl, dist, lel, pll, lt_tri, fb, pbb = ls.wl, ls.dist, ls.le, ls.pl, ls.tri, ls.f, ls.pdf
             valid = pll > 0.0 and (lel[0] > 0.0 or lel[1] > 0.0 or lel[2] > 0.0)
@@ -231,10 +231,10 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
                         leo = triangle_emission(lt, lt_tri, cos_l)
                         plo = triangle_light_pdf(lt, lt_tri, disto * disto, cos_l)
                     wil = to_local(wlo, sfy.s, sfy.t, sfy.ns)
-                    fo = bsdfs.bsdf_eval(sfy.bp, wo_o, wil, True)
+                    fo = bsdfs.bsdf_eval(sfy.bp, wo_o, wil, True, surf.mat_table)
                     if crosses(sfy, dot(wo_y, ngy), ngy, wo_o, wil, wlo):
                         fo = (0.0, 0.0, 0.0)
-                    n_pbo[i, o] = path_density(gs, sfy.bp, y, ngy, wo_y, wlo, bsdfs.bsdf_pdf(sfy.bp, wo_o, wil))
+                    n_pbo[i, o] = path_density(gs, sfy.bp, y, ngy, wo_y, wlo, bsdfs.bsdf_pdf(sfy.bp, wo_o, wil, surf.mat_table), False)
                     n_plo[i, o] = plo
                     n_rj[i, o] = o_R[i, o] * jl
                     for c in range(3):
@@ -252,7 +252,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
                             o_sh_d[i, o, c] = od[c]
 
         # The base's next direction and roulette (the path tracer's, from the guide's mixture)
-        nx = next_bounce(sf, gs, slot, a, wo, ng, cos_o, b, gain[i], dk, rr_depth, MAX_BOUNCES, ps, kk, i)
+        nx = next_bounce(sf, gs, slot, a, wo, ng, cos_o, b, gain[i], dk, rr_depth, MAX_BOUNCES, ps, kk, i, surf.mat_table)
         if not nx.ok:
             continue
         wiw, wt, pdf, dlt, nb, gn, q = nx.wi, nx.weight, nx.pdf, nx.delta, nx.beta, nx.gain, nx.q

@@ -227,10 +227,10 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, surf, gs, roughness, b_x, b_pr
             if st == RECENT:  # at x_i with its own incoming direction
                 wo_w = (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2])
                 wo_o = to_local(wo_w, sfx.s, sfx.t, sfx.ns)
-                f = bsdfs.bsdf_eval(sfx.bp, wo_o, wi_b, True)
+                f = bsdfs.bsdf_eval(sfx.bp, wo_o, wi_b, True, surf.mat_table)
                 if crosses(sfx, dot(wo_w, ngx), ngx, wo_o, wi_b, wib_w):
                     f = (0.0, 0.0, 0.0)
-                po = path_density(gs, sfx.bp, xb, ngx, wo_w, wib_w, bsdfs.bsdf_pdf(sfx.bp, wo_o, wi_b))
+                po = path_density(gs, sfx.bp, xb, ngx, wo_w, wib_w, bsdfs.bsdf_pdf(sfx.bp, wo_o, wi_b, surf.mat_table), False)
                 if not po > 0.0:
                     o_alive[i, o] = False
                     continue
@@ -261,10 +261,10 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, surf, gs, roughness, b_x, b_pr
                         continue
                     d2 = dist * dist
                 wi_o = to_local(wn, sfy.s, sfy.t, sfy.ns)
-                f = bsdfs.bsdf_eval(sfy.bp, wo_o, wi_o, True)
+                f = bsdfs.bsdf_eval(sfy.bp, wo_o, wi_o, True, surf.mat_table)
                 if crosses(sfy, dot(wo_y, ngy), ngy, wo_o, wi_o, wn):
                     f = (0.0, 0.0, 0.0)
-                po = path_density(gs, sfy.bp, y, ngy, wo_y, wn, bsdfs.bsdf_pdf(sfy.bp, wo_o, wi_o))
+                po = path_density(gs, sfy.bp, y, ngy, wo_y, wn, bsdfs.bsdf_pdf(sfy.bp, wo_o, wi_o, surf.mat_table), False)
                 if not (po > 0.0 and math.isfinite(jac)):
                     o_alive[i, o] = False
                     continue
@@ -298,18 +298,18 @@ def shift_offsets(active, t, prim, b1, b2, ray_d, surf, gs, roughness, b_x, b_pr
                 o_reconn[i, o] = _finite(o_beta, o_R, i, o)
                 o_alive[i, o] = o_reconn[i, o]
                 continue
-            # Half-vector copy (between vertices of the same class; a delta vertex and one that is not
-            # have no partner either way, and keep the base's two techniques)
-            o_lights[i, o] = b_delta[i] != bsdfs.bsdf_is_delta(sfy.bp)
-            ok, wi_o, f, po, jac = half_vector_shift(sfx.bp, sfy.bp, wo_b, wi_b, wo_o, b_delta[i])
+            # Half-vector copy (between vertices of the same class; a delta lobe and a vertex without
+            # one, or a smooth lobe and a delta vertex, have no partner either way, and keep the
+            # base's two techniques)
+            o_lights[i, o] = not bsdfs.bsdf_has_delta(sfy.bp) if b_delta[i] else bsdfs.bsdf_is_delta(sfy.bp)
+            ok, wi_o, f, po, jac = half_vector_shift(sfx.bp, sfy.bp, wo_b, wi_b, wo_o, b_delta[i], surf.mat_table)
             if not ok:
                 o_alive[i, o] = False
                 continue
             wiw = to_world(wi_o, sfy.s, sfy.t, sfy.ns)
             if crosses(sfy, dot(wo_y, ngy), ngy, wo_o, wi_o, wiw):
                 f = (0.0, 0.0, 0.0)
-            if not b_delta[i]:
-                po = path_density(gs, sfy.bp, y, ngy, wo_y, wiw, po)
+            po = path_density(gs, sfy.bp, y, ngy, wo_y, wiw, po, b_delta[i])
             org = offset_point(y, ngy, wiw, surf.eps[py])
             for c in range(3):
                 o_beta[i, o, c] *= f[c] * jac / pb

@@ -16,13 +16,13 @@ from ..shading import mixture_pdf
 def is_rough(surf, m, roughness):
     """Material m (of the material.Surfaces surf) is rough enough to reconnect (roughness is not
     textured: the table's row decides)."""
-    return bsdfs.bsdf_roughness(bsdfs.bsdf_row(surf.mat_type, surf.mat_param, m)) > roughness
+    return bsdfs.bsdf_roughness(bsdfs.bsdf_at(surf.mat_type, surf.mat_param, m)) > roughness
 
 
 @jit(inline="always")
 def is_delta(surf, m):
     """Material m (of surf) scatters into discrete directions only."""
-    return bsdfs.bsdf_is_delta(bsdfs.bsdf_row(surf.mat_type, surf.mat_param, m))
+    return bsdfs.bsdf_is_delta(bsdfs.bsdf_at(surf.mat_type, surf.mat_param, m))
 
 
 @jit(inline="always")
@@ -47,21 +47,24 @@ def reconnection(x, y, z, nz):
 
 
 @jit(inline="always")
-def path_density(gs, bp, x, ng, wo_w, wi_w, pb):
+def path_density(gs, bp, x, ng, wo_w, wi_w, pb, delta):
     """The density the path tracer samples world direction wi_w with at vertex x (BSDF bp there,
     geometric normal ng) reached from world direction wo_w (pointing back along the path), given
     the BSDF's own density pb: pb, or with a guide's map there the mixture a pb + (1 - a) p_guide
-    (integrators.path.shade's, for guides without per-pixel maps). What makes an offset's density
+    (integrators.path.shade's, for guides without per-pixel maps); for a delta lobe (delta: pb its
+    probability) of a material that also has a smooth one, a pb. What makes an offset's density
     the one its own pixel's path tracer would give it."""
     if gs.res[0] == 0 or bsdfs.bsdf_is_delta(bp):
         return pb
     nf = ng if dot(wo_w, ng) >= 0.0 else (-ng[0], -ng[1], -ng[2])
     _, slot, a = locate(gs, x, nf, -1, 1)
+    if delta:
+        return a * pb
     return mixture_pdf(gs, slot, a, pb, wi_w)
 
 
 @jit(inline="always")
-def half_vector_shift(bpx, bpy, wo_b, wi_b, wo_o, delta):
+def half_vector_shift(bpx, bpy, wo_b, wi_b, wo_o, delta, table):
     """The direction of the offset at y (BSDF bpy, incoming wo_o, local) that copies the base's
     bounce at x (BSDF bpx, wo_b -> wi_b, local; delta: from a delta lobe). Returns (ok, wi_o,
     f |cos| (discrete value for a delta lobe), density, Jacobian d wi_o / d wi_b). It fails (ok False)
@@ -111,6 +114,6 @@ def half_vector_shift(bpx, bpy, wo_b, wi_b, wo_o, delta):
     if not den > 0.0 or (wo_o[2] * wi[2] < 0.0) != transmit:  # the offset's lobe must be the base's
         return False, zero, zero, 0.0, 0.0
     jac = et_b * et_b * abs(dot(wi_b, h)) * dot(ho, ho) / den
-    f = bsdfs.bsdf_eval(bpy, wo_o, wi, True)
-    pdf = bsdfs.bsdf_pdf(bpy, wo_o, wi)
+    f = bsdfs.bsdf_eval(bpy, wo_o, wi, True, table)
+    pdf = bsdfs.bsdf_pdf(bpy, wo_o, wi, table)
     return pdf > 0.0 and math.isfinite(jac), wi, f, pdf, jac

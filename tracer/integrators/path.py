@@ -150,13 +150,13 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs,
             ok, so, sd, tmax, contrib = next_event(
                 sf, lt, surf.tri, x, ng, cos_o, wo, b, gs, slot, a, surf.eps[p],
                 surf.eps, draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
-                draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)))
+                draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)), surf.mat_table)
             if ok:
                 write_shadow(k, so, sd, tmax, contrib, sh_o, sh_d, sh_tmax, sh_L, has_shadow)
 
         # The continuation from the mixture (the guide with probability 1 - a, else the BSDF), then
         # possibly the end of the path by Russian roulette
-        nx = next_bounce(sf, gs, slot, a, wo, ng, cos_o, b, gain[i], dk, rr_depth, MAX_BOUNCES, ps, kk, i)
+        nx = next_bounce(sf, gs, slot, a, wo, ng, cos_o, b, gain[i], dk, rr_depth, MAX_BOUNCES, ps, kk, i, surf.mat_table)
         ok, wiw, wt, pdf, pbs, dlt, strategy = nx.ok, nx.wi, nx.weight, nx.pdf, nx.pdf_bsdf, nx.delta, nx.strategy
         nb, gn = nx.beta, nx.gain
 
@@ -165,7 +165,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs,
         if record != RECORD_NONE:
             last = prev_rec[i]
             prev_rec[i] = -1
-        if record != RECORD_NONE and not delta and pdf > 0.0:
+        if record != RECORD_NONE and not delta and not dlt and pdf > 0.0:
             r = rec_base + k
             r_prev[r] = last
             prev_rec[i] = r

@@ -3,7 +3,10 @@
 The subset the field's scenes use most, for now: `<default>` and `$name`; `<bsdf>` by id and
 `<ref>`, nested in `twosided` (Mitsuba's BSDFs are one-sided otherwise: the ONE_SIDED flag);
 `diffuse`, `conductor`/`roughconductor` (METAL: `eta`/`k`, a named `material`, GGX or Beckmann,
-`specular_reflectance`), `dielectric`, `roughdielectric` (GGX), `thindielectric`; textures
+`specular_reflectance`), `dielectric`, `roughdielectric` (GGX), `thindielectric`, `plastic` and
+`roughplastic` (COATED, `nonlinear`; indices as numbers or Mitsuba's named media), `mask` (an
+opacity value or texture: params[P_CLEAR]) and `bumpmap` (a height texture and its scale) around
+any of them; textures
 `bitmap` and `checkerboard` with a `to_uv` scale/translate/matrix; shapes `obj` (with `to_world`,
 `face_normals`, `flip_normals`) and `rectangle`, an `area` emitter on a shape; the `perspective`
 sensor (`fov`, `fov_axis` x or y, `to_world` as a matrix or lookat), the film's size, the
@@ -22,7 +25,7 @@ import numpy as np
 
 from .. import bsdfs
 from ..errors import SceneError
-from ..material import N_TEX_SLOTS, TEX_SLOT_KD, TEX_SLOT_KS
+from ..material import N_TEX_SLOTS, P_BUMP_SCALE, TEX_SLOT_BUMP, TEX_SLOT_KD, TEX_SLOT_KS, TEX_SLOT_OPACITY
 from ..metals import METALS
 from ..scene import CameraSpec, RenderSettings, SceneSpec
 from ..textures import TextureSpec
@@ -33,6 +36,14 @@ _CAMEL = {"toWorld": "to_world", "faceNormals": "face_normals", "flipNormals": "
           "sampleCount": "sample_count", "intIOR": "int_ior", "extIOR": "ext_ior", "fovAxis": "fov_axis",
           "specularReflectance": "specular_reflectance", "diffuseReflectance": "diffuse_reflectance",
           "toUV": "to_uv", "filterType": "filter_type"}
+
+
+# Mitsuba's named indices of refraction (include/mitsuba/render/ior.h)
+IORS = {"vacuum": 1.0, "helium": 1.000036, "hydrogen": 1.000132, "air": 1.000277, "carbon dioxide": 1.00045,
+        "water": 1.3330, "acetone": 1.36, "ethanol": 1.361, "carbon tetrachloride": 1.461, "glycerol": 1.4729,
+        "benzene": 1.501, "silicone oil": 1.52045, "bromine": 1.661, "water ice": 1.31, "fused quartz": 1.458,
+        "pyrex": 1.470, "acrylic glass": 1.49, "polypropylene": 1.49, "bk7": 1.5046, "sodium chloride": 1.544,
+        "amber": 1.55, "pet": 1.5750, "diamond": 2.419}
 
 
 class _Node:
@@ -119,6 +130,19 @@ class _Reader:
             return float(self.attr(el, "value"))
         except (TypeError, ValueError):
             raise SceneError(f"{self.where(el)}: {self.name(el)!r} needs a number, got {el.get('value')!r}") from None
+
+    def ior(self, p, name, default):
+        """An index of refraction: a number, or one of Mitsuba's named media (IORS)."""
+        if name not in p:
+            return IORS[default]
+        v = (p[name].get("value") or "").strip()
+        try:
+            return float(v)
+        except ValueError:
+            if v.lower() in IORS:
+                return IORS[v.lower()]
+        raise SceneError(f"{self.where(p[name])}: {name} {v!r} is neither a number nor a known medium; "
+                         f"valid: {', '.join(IORS)}")
 
     def rgb(self, el):
         if el.tag == "float":
@@ -231,18 +255,36 @@ class _Reader:
         param = np.zeros(bsdfs.N_PARAM)
         tex = [-1] * N_TEX_SLOTS
         flags = bsdfs.ONE_SIDED if one_sided else 0
-        if kind == "twosided":
+        if kind in ("twosided", "mask", "bumpmap"):
             inner = [c for c in el if c.tag in ("bsdf", "ref")]
             if not inner:
-                raise SceneError(f"{self.where(el)}: twosided without a nested bsdf")
+                raise SceneError(f"{self.where(el)}: {kind} without a nested bsdf")
             child = inner[0] if inner[0].tag == "bsdf" else self.ids.get(self.attr(inner[0], "id"))
             if child is None:
                 raise SceneError(f"{self.where(inner[0])}: no bsdf with id {inner[0].get('id')!r}")
-            return self.bsdf(child, one_sided=False)
+            mtype, param, tex = self.bsdf(child, one_sided=one_sided and kind != "twosided")
+            if kind == "mask":  # opacity: a number or a texture (its luminance), 0.5 by default
+                op, t = self.color_or_texture(p.get("opacity"), (0.5, 0.5, 0.5))
+                param[bsdfs.P_CLEAR] = 1.0 - min(max(float(np.mean(op)), 0.0), 1.0)
+                if t is not None:
+                    param[bsdfs.P_CLEAR] = 0.0
+                    t.fallback = (1.0, 1.0, 1.0)  # an unreadable mask: opaque
+                    tex[TEX_SLOT_OPACITY] = self.add_texture(t)
+            elif kind == "bumpmap":  # the height texture (any name), its scale
+                hs = [c for c in el if c.tag in ("texture", "ref") and c is not inner[0]]
+                if not hs:
+                    raise SceneError(f"{self.where(el)}: bumpmap without a height texture")
+                _, t = self.color_or_texture(hs[0], (0.0, 0.0, 0.0))
+                if t is None:
+                    raise SceneError(f"{self.where(hs[0])}: bumpmap's height must be a texture")
+                tex[TEX_SLOT_BUMP] = self.add_texture(t)
+                param[P_BUMP_SCALE] = self.number(p["scale"]) if "scale" in p else 1.0
+            return mtype, param, list(tex)
         alpha = self.number(p["alpha"]) if "alpha" in p else 0.1
         dist = self.attr(p["distribution"], "value") if "distribution" in p else "beckmann"
-        ior_in = self.number(p["int_ior"]) if "int_ior" in p else 1.5046
-        ior_out = self.number(p["ext_ior"]) if "ext_ior" in p else 1.000277
+        coat = kind in ("plastic", "roughplastic")
+        ior_in = self.ior(p, "int_ior", "polypropylene" if coat else "bk7")
+        ior_out = self.ior(p, "ext_ior", "air")
         if kind in ("diffuse", "roughdiffuse"):
             if kind == "roughdiffuse":
                 self.warn(el, "roughdiffuse is rendered as diffuse (as Mitsuba 3 does)")
@@ -279,15 +321,21 @@ class _Reader:
                 param[6] = alpha
                 return bsdfs.ROUGH_DIELECTRIC, param, tex
             return (bsdfs.THIN_DIELECTRIC if kind == "thindielectric" else bsdfs.DIELECTRIC), param, tex
-        if kind in ("plastic", "roughplastic"):
+        if coat:
             kd, t = self.color_or_texture(p.get("diffuse_reflectance"), (0.5, 0.5, 0.5))
-            self.warn(el, f"{kind} is not supported yet: rendered as the tracer's Fresnel-less plastic (kd = its "
-                          "diffuse_reflectance, ks 0.04)")
             param[0:3] = kd
-            param[3:6] = 0.04
-            param[6] = max(alpha if kind == "roughplastic" else 0.01, 1e-3)
             tex[TEX_SLOT_KD] = self.add_texture(t)
-            return bsdfs.PLASTIC, param, tex
+            ks, t = self.color_or_texture(p.get("specular_reflectance"), (1.0, 1.0, 1.0))
+            param[3:6] = ks
+            tex[TEX_SLOT_KS] = self.add_texture(t)
+            param[6] = alpha if kind == "roughplastic" else 0.0
+            param[7] = ior_in / ior_out
+            if kind == "roughplastic" and dist == "beckmann":
+                flags |= bsdfs.BECKMANN
+            if "nonlinear" in p and self.attr(p["nonlinear"], "value") == "true":
+                flags |= bsdfs.NONLINEAR
+            param[14] = flags
+            return bsdfs.COATED, param, tex
         self.warn(el, f"bsdf type {kind!r} is not supported; rendered as diffuse 0.5")
         param[0:3] = 0.5
         return bsdfs.DIFFUSE, param, tex

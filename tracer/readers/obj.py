@@ -9,6 +9,7 @@ Lambertian; `Ke` one-sided emission (every emissive triangle is an area light); 
 rough metal with GGX alpha = Pr^2; other `Ks` + `Ns` glossy plastic with alpha = sqrt(2 / (Ns +
 2)). Statements the tracer cannot honour are reported once per file, never silently dropped.
 """
+import logging
 import math
 import os
 from dataclasses import dataclass
@@ -17,14 +18,15 @@ import numpy as np
 
 from .. import bsdfs
 from ..errors import SceneError
-from ..material import N_TEX_SLOTS, P_BUMP_SCALE, TEX_SLOT_BUMP, TEX_SLOT_KD, TEX_SLOT_KS
+from ..material import N_TEX_SLOTS, P_BUMP_SCALE, TEX_SLOT_BUMP, TEX_SLOT_KD, TEX_SLOT_KS, TEX_SLOT_OPACITY
 from ..textures import TextureSpec
 from ..objread import ObjMesh, assemble, read_obj
 from .text import check_text, read_bytes, read_text, warn
 
 _MTL_USED = {"newmtl", "Kd", "Ks", "Ke", "Ns", "Ni", "illum", "Pr", "Pm", "d", "Tr", "Tf"}
 # the texture maps the tracer reads, and their slots (tracer.material)
-_MTL_MAPS = {"map_Kd": TEX_SLOT_KD, "map_Ks": TEX_SLOT_KS, "bump": TEX_SLOT_BUMP, "map_bump": TEX_SLOT_BUMP}
+_MTL_MAPS = {"map_Kd": TEX_SLOT_KD, "map_Ks": TEX_SLOT_KS, "bump": TEX_SLOT_BUMP, "map_bump": TEX_SLOT_BUMP,
+             "map_d": TEX_SLOT_OPACITY}
 # options of a map statement and how many numbers each takes at most
 _MAP_OPTIONS = {"-blendu": 1, "-blendv": 1, "-bm": 1, "-boost": 1, "-cc": 1, "-clamp": 1, "-imfchan": 1, "-mm": 2,
                 "-o": 3, "-s": 3, "-t": 3, "-texres": 1, "-type": 1}
@@ -251,19 +253,25 @@ def material_from_mtl(name, st, where, warnings, textures=None):
         mtype = bsdfs.DIFFUSE
     if pr is not None and pr > 0 and mtype in (bsdfs.MIRROR, bsdfs.DIELECTRIC):
         warn(warnings, f"{where}: material {name!r}: Pr is ignored by its illum {illum}")
-    dissolve = st.get("d", [1.0])[0]
-    tr = st.get("Tr", [0.0])[0]
+    glass = mtype in (bsdfs.DIELECTRIC, bsdfs.ROUGH_DIELECTRIC)
+    opacity = st["d"][0] if "d" in st else 1.0 - st.get("Tr", [0.0])[0]
+    opacity = min(max(opacity, 0.0), 1.0)
     tf = st.get("Tf", [0.0])
-    see_through = dissolve < 1.0 or tr > 0.0 or ("Tf" in st and max(tf) > 0.0 and tf != [1.0, 1.0, 1.0])
-    if see_through and mtype not in (bsdfs.DIELECTRIC, bsdfs.ROUGH_DIELECTRIC):
-        said = " ".join(f"{k} {' '.join(f'{v:g}' for v in st[k])}" for k in ("d", "Tr", "Tf") if k in st)
+    said = " ".join(f"{k} {' '.join(f'{v:g}' for v in st[k])}" for k in ("d", "Tr", "Tf") if k in st)
+    fix = f"if it is glass, set materials.{name}.type to \"dielectric\" (and ior) in the sidecar"
+    if not glass and (opacity < 1.0 or "map_d" in st):
+        warn(warnings, f"{where}: material {name!r} has an opacity ({said or 'map_d'}): rendered as a cut-out, "
+                       f"the rest of the light passing straight through without refraction; {fix}", logging.INFO
+             if "map_d" in st and opacity == 1.0 else logging.WARNING)
+    elif not glass and "Tf" in st and max(tf) > 0.0 and tf != [1.0, 1.0, 1.0]:
         warn(warnings, f"{where}: material {name!r} is partly transparent ({said}) but renders opaque "
-                       f"(illum {illum}; opacity is not supported yet); if it is glass, set "
-                       f"materials.{name}.type to \"dielectric\" (and ior) in the sidecar")
+                       f"(illum {illum}: Tf is not a transmission the tracer reads); {fix}")
     if np.any(kd > 1.0) and mtype in (bsdfs.DIFFUSE, bsdfs.PLASTIC):
         warn(warnings, f"{where}: material {name!r} has Kd > 1 (reflects more than it receives)")
     param = np.zeros(bsdfs.N_PARAM)
     param[:8] = [*kd, *ks, alpha, ior]
+    if not glass:
+        param[bsdfs.P_CLEAR] = 1.0 - opacity
     tex = [-1] * N_TEX_SLOTS
     for key, slot in _MTL_MAPS.items():
         if key not in st or textures is None or tex[slot] >= 0:
@@ -271,10 +279,13 @@ def material_from_mtl(name, st, where, warnings, textures=None):
         file, uv, bm, line = st[key]
         if mtype == bsdfs.CONDUCTOR and key == "map_Kd" and slot == TEX_SLOT_KD:
             slot = TEX_SLOT_KS  # a metal's base colour is its F0
-        if mtype in (bsdfs.DIELECTRIC, bsdfs.ROUGH_DIELECTRIC) and slot != TEX_SLOT_BUMP:
+        if glass and slot != TEX_SLOT_BUMP:
             warn(warnings, f"{where}: material {name!r} is a dielectric: its {key} is ignored")
             continue
-        base = (0.0, 0.0, 0.0) if slot == TEX_SLOT_BUMP else tuple(param[3 * slot: 3 * slot + 3])
+        base = (0.0, 0.0, 0.0) if slot == TEX_SLOT_BUMP else (opacity,) * 3 if slot == TEX_SLOT_OPACITY else \
+            tuple(param[3 * slot: 3 * slot + 3])
+        if slot == TEX_SLOT_OPACITY:
+            param[bsdfs.P_CLEAR] = 0.0  # the texture gives it (map_d replaces d)
         textures.append(TextureSpec("bitmap", file, uv=uv, fallback=base, where=f"{line} ({name!r}, {key})"))
         tex[slot] = len(textures) - 1
         if slot == TEX_SLOT_BUMP:

@@ -28,7 +28,8 @@ SIDECAR_KEYS = {
     "materials": None,  # keyed by material name
     "obj": None,  # only in a JSON scene file
 }
-MATERIAL_KEYS = {"type", "kd", "ks", "alpha", "ior", "emission", "metal", "eta", "k", "one_sided"}
+MATERIAL_KEYS = {"type", "kd", "ks", "alpha", "ior", "emission", "metal", "eta", "k", "one_sided", "opacity",
+                 "nonlinear"}
 # Keyword overrides of load_scene and the sidecar section each one belongs to.
 OVERRIDES = {
     "width": "film",
@@ -115,7 +116,12 @@ def material_override(name, spec, base, where):
             raise SceneError(
                 f"{where}: materials.{name}.type {spec['type']!r} unknown; valid: {', '.join(bsdfs.TYPE_NAMES)}"
             )
+        was = mtype
         mtype = bsdfs.TYPE_NAMES.index(spec["type"])
+        if mtype == bsdfs.COATED and was != bsdfs.COATED:
+            param[3:6] = 1.0  # the coat's specular reflectance (Mitsuba's default; `ks` below may set it)
+            if tex:
+                tex[1] = -1
     if "kd" in spec:
         param[0:3] = vec3(f"{where}: materials.{name}.kd", spec["kd"])
         if tex:
@@ -138,6 +144,19 @@ def material_override(name, spec, base, where):
         param[8:11] = vec3(f"{where}: materials.{name}.eta", spec["eta"])
     if "k" in spec:
         param[11:14] = vec3(f"{where}: materials.{name}.k", spec["k"])
+    if mtype in (bsdfs.DIELECTRIC, bsdfs.ROUGH_DIELECTRIC, bsdfs.THIN_DIELECTRIC):
+        param[bsdfs.P_CLEAR] = 0.0  # glass: the MTL's opacity (d, map_d) meant its transparency
+        if tex:
+            tex[3] = -1
+    if "opacity" in spec:
+        op = number(f"{where}: materials.{name}.opacity", spec["opacity"], lo=0.0)
+        if op > 1.0:
+            raise SceneError(f"{where}: materials.{name}.opacity must be in [0, 1], got {op}")
+        param[bsdfs.P_CLEAR] = 1.0 - op
+        if tex:
+            tex[3] = -1
+    if "nonlinear" in spec:
+        param[14] = (int(param[14]) & ~bsdfs.NONLINEAR) | (bsdfs.NONLINEAR if spec["nonlinear"] else 0)
     if "one_sided" in spec:
         flags = int(param[14]) & ~bsdfs.ONE_SIDED
         param[14] = flags | (bsdfs.ONE_SIDED if spec["one_sided"] else 0)

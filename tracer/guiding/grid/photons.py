@@ -249,18 +249,20 @@ def scatter(active, d, t, prim, b1, b2, surf, gs, data_slot,
         if islot >= 0 and u2 < p_imp:
             wiw, pg = map_sample(imp.rowcum, imp.dens, imp.wsum, imp.pscale, islot, imp.n_theta, imp.n_phi, u0, u1)
             wi = to_local(wiw, s, tt, ns)
-            f = bsdfs.bsdf_eval(sf.bp, wo, wi, False)
-            pm = (1.0 - p_imp) * bsdfs.bsdf_pdf(sf.bp, wo, wi) + p_imp * pg
+            f = bsdfs.bsdf_eval(sf.bp, wo, wi, False, surf.mat_table)
+            pm = (1.0 - p_imp) * bsdfs.bsdf_pdf(sf.bp, wo, wi, surf.mat_table) + p_imp * pg
             wt = (0.0, 0.0, 0.0)
             if pm > 0.0:
                 wt = (f[0] / pm, f[1] / pm, f[2] / pm)
         else:
             if islot >= 0:
                 u2 = min((u2 - p_imp) / (1.0 - p_imp), 1.0 - 1e-12)
-            wi, wt, pdf, dlt = bsdfs.bsdf_sample(sf.bp, wo, u0, u1, u2, False)
-            if islot >= 0 and pdf > 0.0 and not dlt:
-                pm = (1.0 - p_imp) * pdf + p_imp * map_pdf(imp.dens, imp.pscale, islot, imp.n_theta, imp.n_phi,
-                                                          to_world(wi, s, tt, ns))
+            wi, wt, pdf, dlt = bsdfs.bsdf_sample(sf.bp, wo, u0, u1, u2, False, surf.mat_table)
+            if islot >= 0 and pdf > 0.0:
+                # a delta lobe beside a smooth one: picked with probability (1 - p_imp) x its own
+                pm = (1.0 - p_imp) * pdf
+                if not dlt:
+                    pm += p_imp * map_pdf(imp.dens, imp.pscale, islot, imp.n_theta, imp.n_phi, to_world(wi, s, tt, ns))
                 r = pdf / pm
                 wt = (wt[0] * r, wt[1] * r, wt[2] * r)
         if sf.smooth:
