@@ -17,6 +17,7 @@ UVs: the OBJ reader keeps OBJ's v (up the image); Mitsuba's textures read (u, 1 
 texture's `to_uv` is composed with that flip here, and a rectangle's UVs are given in OBJ's
 convention.
 """
+import math
 import os
 import re
 from xml.parsers import expat
@@ -27,7 +28,7 @@ from .. import bsdfs
 from ..errors import SceneError
 from ..material import N_TEX_SLOTS, P_BUMP_SCALE, TEX_SLOT_BUMP, TEX_SLOT_KD, TEX_SLOT_KS, TEX_SLOT_OPACITY
 from ..metals import METALS
-from ..scene import CameraSpec, RenderSettings, SceneSpec
+from ..scene import CameraSpec, Environment, RenderSettings, SceneSpec
 from ..textures import TextureSpec
 from .obj import read_geometry
 from .text import warn
@@ -44,6 +45,99 @@ IORS = {"vacuum": 1.0, "helium": 1.000036, "hydrogen": 1.000132, "air": 1.000277
         "benzene": 1.501, "silicone oil": 1.52045, "bromine": 1.661, "water ice": 1.31, "fused quartz": 1.458,
         "pyrex": 1.470, "acrylic glass": 1.49, "polypropylene": 1.49, "bk7": 1.5046, "sodium chloride": 1.544,
         "amber": 1.55, "pet": 1.5750, "diamond": 2.419}
+
+SPHERE_RINGS = 96  # a sphere: 96 rings x 192 segments (36,864 triangles; area within 0.02%)
+DISK_SEGMENTS = 192  # a disk's or cylinder's segments (area within 0.02%)
+
+
+def _cube():
+    """Mitsuba's cube [-1, 1]^3: two triangles per face, wound outward, per-face UVs."""
+    tris, uvs = [], []
+    for axis in range(3):
+        for sgn in (-1.0, 1.0):
+            a, b = (axis + 1) % 3, (axis + 2) % 3
+            q = np.zeros((4, 3))
+            q[:, axis] = sgn
+            q[:, a] = [-1, 1, 1, -1]
+            q[:, b] = [-1, -1, 1, 1]
+            if sgn < 0:
+                q = q[::-1]
+            tris += [q[[0, 1, 2]], q[[0, 2, 3]]]
+            uvs += [np.array([[0, 0], [1, 0], [1, 1]], float), np.array([[0, 0], [1, 1], [0, 1]], float)]
+    return np.array(tris), np.array(uvs), None
+
+
+def _grid(n_u, n_v, point, normal):
+    """Triangles of a (u, v) grid of n_u x n_v cells: point(u, v) and normal(u, v) on [0, 1]^2,
+    corners (u, v) as UVs in Mitsuba's (u, 1 - v) convention."""
+    u, v = np.meshgrid(np.linspace(0, 1, n_u + 1), np.linspace(0, 1, n_v + 1), indexing="ij")
+    P, N = point(u, v), normal(u, v)
+    i, j = np.meshgrid(np.arange(n_u), np.arange(n_v), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    quads = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)]
+    tri_idx = [(quads[0], quads[1], quads[2]), (quads[0], quads[2], quads[3])]
+    tris = np.concatenate([np.stack([P[a] for a in t], 1) for t in tri_idx])
+    nrm = np.concatenate([np.stack([N[a] for a in t], 1) for t in tri_idx])
+    uv = np.concatenate([np.stack([np.stack([u[a], 1.0 - v[a]], -1) for a in t], 1) for t in tri_idx])
+    area = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    keep = area > 1e-14
+    return tris[keep], uv[keep], nrm[keep]
+
+
+def _sphere(rings):
+    """The unit sphere, counter-clockwise seen from outside, smooth normals; its radius raised so
+    that the triangles' area is the sphere's (an emitting sphere keeps its power)."""
+    def pt(u, v):
+        th, ph = np.pi * v, 2.0 * np.pi * u
+        return np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1)
+    tris, uv, nrm = _grid(2 * rings, rings, pt, pt)
+    tris = tris[:, ::-1]  # outward: (u, v) runs clockwise seen from outside
+    uv, nrm = uv[:, ::-1], nrm[:, ::-1]
+    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1).sum()
+    return tris * np.sqrt(4.0 * np.pi / area), uv, nrm
+
+
+def _disk(segments):
+    """The unit disk in z = 0, normal +z (Mitsuba's disk)."""
+    def pt(u, v):
+        return np.stack([v * np.cos(2 * np.pi * u), v * np.sin(2 * np.pi * u), 0.0 * u], -1)
+    tris, uv, _ = _grid(segments, 1, pt, lambda u, v: np.stack([0 * u, 0 * u, 1 + 0 * u], -1))
+    if tris.shape[0] and np.cross(tris[0, 1] - tris[0, 0], tris[0, 2] - tris[0, 0])[2] < 0:
+        tris, uv = tris[:, ::-1], uv[:, ::-1]
+    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1).sum()
+    return tris * np.sqrt(np.pi / area), uv, None
+
+
+def _cylinder(segments):
+    """The open unit cylinder from z = 0 to 1, radius 1, normals outward (Mitsuba's cylinder)."""
+    def pt(u, v):
+        return np.stack([np.cos(2 * np.pi * u), np.sin(2 * np.pi * u), v], -1)
+    def nr(u, v):
+        return np.stack([np.cos(2 * np.pi * u), np.sin(2 * np.pi * u), 0 * v], -1)
+    tris, uv, nrm = _grid(segments, 1, pt, nr)
+    c = tris.mean(axis=1)
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    if np.sum(n[:, :2] * c[:, :2]) < 0:
+        tris, uv, nrm = tris[:, ::-1], uv[:, ::-1], nrm[:, ::-1]
+    k = np.sqrt(2.0 * np.pi / (np.linalg.norm(n, axis=1).sum() * 0.5))  # the lateral area 2 pi
+    tris = tris * np.array([k, k, 1.0])
+    return tris, uv, nrm
+
+
+def _frame_to(p0, p1, r):
+    """4x4 taking the unit cylinder (z from 0 to 1, radius 1) to the one from p0 to p1 of radius r."""
+    d = p1 - p0
+    h = float(np.linalg.norm(d))
+    if not h > 0.0:
+        raise SceneError("cylinder: p0 and p1 coincide")
+    z = d / h
+    a = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(a, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    out = np.eye(4)
+    out[:3, 0], out[:3, 1], out[:3, 2], out[:3, 3] = r * x, r * y, h * z, p0
+    return out
 
 
 class _Node:
@@ -98,6 +192,7 @@ class _Reader:
         self.materials = []  # (name, type, param, emission, tex)
         self.by_name = {}  # material name -> index (a BSDF shared by shapes is one material)
         self.tris, self.mats, self.uvs, self.normals = [], [], [], []
+        self.environment = None  # a constant emitter
 
     # --- values ------------------------------------------------------------------------------
     def where(self, el):
@@ -143,6 +238,33 @@ class _Reader:
                 return IORS[v.lower()]
         raise SceneError(f"{self.where(p[name])}: {name} {v!r} is neither a number nor a known medium; "
                          f"valid: {', '.join(IORS)}")
+
+    def point(self, el):
+        """A <point> (x, y, z attributes, or value "x, y, z")."""
+        if el.get("value") is not None:
+            v = [float(x) for x in re.split(r"[,\s]+", self.attr(el, "value").strip()) if x]
+            if len(v) == 3:
+                return tuple(v)
+            raise SceneError(f"{self.where(el)}: a point needs three numbers")
+        try:
+            return tuple(float(self.attr(el, k, "0")) for k in ("x", "y", "z"))
+        except ValueError:
+            raise SceneError(f"{self.where(el)}: malformed point") from None
+
+    def emitter(self, el):
+        """A top-level emitter: `constant` as the scene's environment; the others one line each."""
+        kind = self.attr(el, "type")
+        p = self.props(el)
+        if kind == "constant":
+            rad = np.asarray(self.rgb(p["radiance"]) if "radiance" in p else (1.0, 1.0, 1.0), float)
+            if self.environment is not None:
+                self.warn(el, "a second environment emitter; ignored")
+                return
+            self.environment = Environment(rad)
+        elif kind in ("sunsky", "sky", "sun"):
+            self.warn(el, f"emitter {kind!r} is not supported (no sun or sky model); the scene renders without it")
+        else:
+            self.warn(el, f"emitter {kind!r} is not supported yet; the scene renders without it")
 
     def rgb(self, el):
         if el.tag == "float":
@@ -362,6 +484,21 @@ class _Reader:
             tri = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]], float)
             uv = np.array([[[0, 1], [1, 1], [1, 0]], [[0, 1], [1, 0], [0, 0]]], float)  # Mitsuba's (u, 1 - v)
             nrm = None
+        elif kind == "cube":
+            tri, uv, nrm = _cube()
+        elif kind == "sphere":
+            c = np.asarray(self.point(p["center"]) if "center" in p else (0.0, 0.0, 0.0))
+            r = self.number(p["radius"]) if "radius" in p else 1.0
+            tri, uv, nrm = _sphere(SPHERE_RINGS)
+            m = m @ np.array([[r, 0, 0, c[0]], [0, r, 0, c[1]], [0, 0, r, c[2]], [0, 0, 0, 1]])
+        elif kind == "disk":
+            tri, uv, nrm = _disk(DISK_SEGMENTS)
+        elif kind == "cylinder":
+            p0 = np.asarray(self.point(p["p0"]) if "p0" in p else (0.0, 0.0, 0.0))
+            p1 = np.asarray(self.point(p["p1"]) if "p1" in p else (0.0, 0.0, 1.0))
+            r = self.number(p["radius"]) if "radius" in p else 1.0
+            tri, uv, nrm = _cylinder(DISK_SEGMENTS)
+            m = m @ _frame_to(p0, p1, r)
         else:
             self.warn(el, f"shape type {kind!r} is not supported yet; the shape is left out")
             return
@@ -433,6 +570,8 @@ class _Reader:
                     render.spp = spp
             elif tag == "shape":
                 self.shape(el)
+            elif tag == "emitter":
+                self.emitter(el)
             else:
                 self.warn(el, f"<{tag}> is not supported yet; ignored")
         if not self.tris:
@@ -442,7 +581,8 @@ class _Reader:
         return SceneSpec(path=self.path, geometry_file=self.path, tri=np.concatenate(self.tris),
                          tri_material=np.concatenate(self.mats), materials=self.materials, width=width,
                          height=height, render=render, camera=spec_cam, warnings=self.warnings,
-                         no_light="no area emitter on any shape", uv=np.concatenate(self.uvs) if has_uv else None,
+                         no_light="no area emitter on any shape and no constant emitter",
+                         environment=self.environment, uv=np.concatenate(self.uvs) if has_uv else None,
                          normals=np.concatenate(self.normals) if has_n else None, textures=self.textures)
 
     def sensor(self, el, cam):
@@ -453,9 +593,9 @@ class _Reader:
         p = self.props(el)
         cam.fov = self.number(p["fov"]) if "fov" in p else 45.0
         axis = self.attr(p["fov_axis"], "value") if "fov_axis" in p else "x"
-        if axis not in ("x", "y"):
-            self.warn(p["fov_axis"], f"fov_axis {axis!r} is not supported yet; x is used")
-            axis = "x"
+        if axis not in ("x", "y", "diagonal", "smaller", "larger"):
+            raise SceneError(f"{self.where(p['fov_axis'])}: fov_axis {axis!r} unknown; valid: x, y, diagonal, "
+                             f"smaller, larger")
         cam.fov_axis = axis
         if "to_world" in p:
             cam.matrix = self.matrix(p["to_world"])
@@ -471,6 +611,13 @@ class _Reader:
             elif c.tag == "sampler":
                 sp = self.props(c)
                 spp = int(self.number(sp["sample_count"])) if "sample_count" in sp else 0
+        if cam.fov_axis in ("diagonal", "smaller", "larger"):  # as the horizontal fov Mitsuba means
+            t = math.tan(math.radians(cam.fov) / 2.0)
+            if cam.fov_axis == "diagonal":
+                t *= width / math.hypot(width, height)
+            elif (cam.fov_axis == "smaller") == (height < width):
+                t *= width / height  # the fov is the vertical one
+            cam.fov, cam.fov_axis = math.degrees(2.0 * math.atan(t)), "x"
         return cam, width, height, spp
 
 
