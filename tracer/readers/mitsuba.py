@@ -8,8 +8,10 @@ The subset the field's scenes use most, for now: `<default>` and `$name`; `<bsdf
 opacity value or texture: params[P_CLEAR]) and `bumpmap` (a height texture and its scale) around
 any of them; textures
 `bitmap` and `checkerboard` with a `to_uv` scale/translate/matrix; shapes `obj` (with `to_world`,
-`face_normals`, `flip_normals`) and `rectangle`, an `area` emitter on a shape; the `perspective`
-sensor (`fov`, `fov_axis` x or y, `to_world` as a matrix or lookat), the film's size, the
+`face_normals`, `flip_normals`; without vn, Mitsuba's smooth normals), `rectangle`, `cube`,
+`sphere`, `disk`, `cylinder` (tessellated, area exact), an `area` emitter on a shape, a `constant`
+emitter; the `perspective`
+sensor (`fov`, `fov_axis` x, y, diagonal, smaller, larger, `to_world` as a matrix or lookat), the film's size, the
 integrator's `max_depth` and the sampler's `sample_count`. Everything else is one warning naming
 the file and line (a shape or BSDF it cannot read is left out or replaced, as the warning says).
 
@@ -48,6 +50,35 @@ IORS = {"vacuum": 1.0, "helium": 1.000036, "hydrogen": 1.000132, "air": 1.000277
 
 SPHERE_RINGS = 96  # a sphere: 96 rings x 192 segments (36,864 triangles; area within 0.02%)
 DISK_SEGMENTS = 192  # a disk's or cylinder's segments (area within 0.02%)
+
+
+def vertex_normals(tri):
+    """Smooth corner normals (F, 3, 3) of a triangle soup, as Mitsuba 3 computes them for a mesh
+    without normals: corners at the same position share one, the sum of their faces' unit normals
+    weighted by each corner's interior angle (Thuermer and Wuethrich 1998). A corner whose sum
+    vanishes keeps its face's normal (zero for a degenerate face: flat)."""
+    f = tri.shape[0]
+    _, inv = np.unique(tri.reshape(-1, 3), axis=0, return_inverse=True)
+    inv = inv.reshape(f, 3)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+    acc = np.zeros((int(inv.max()) + 1 if f else 0, 3))
+    for k in range(3):
+        a = tri[:, (k + 1) % 3] - tri[:, k]
+        b = tri[:, (k + 2) % 3] - tri[:, k]
+        la = np.linalg.norm(a, axis=1)
+        lb = np.linalg.norm(b, axis=1)
+        ok = (la > 0) & (lb > 0)
+        c = np.einsum("ij,ij->i", a, b) / np.where(ok, la * lb, 1.0)
+        ang = np.where(ok, np.arccos(np.clip(c, -1.0, 1.0)), 0.0)
+        np.add.at(acc, inv[:, k], n * ang[:, None])
+    la = np.linalg.norm(acc, axis=1, keepdims=True)
+    acc = np.divide(acc, la, out=np.zeros_like(acc), where=la > 0)
+    out = acc[inv]
+    bad = np.linalg.norm(out, axis=2) == 0
+    out[bad] = np.broadcast_to(n[:, None, :], out.shape)[bad]
+    return out
 
 
 def _cube():
@@ -466,6 +497,7 @@ class _Reader:
     def shape(self, el):
         kind = self.attr(el, "type")
         p = self.props(el)
+        smooth = False
         m = self.matrix(p["to_world"]) if "to_world" in p else np.eye(4)
         if kind == "obj":
             file = os.path.join(self.folder, self.attr(p["filename"], "value"))
@@ -477,9 +509,8 @@ class _Reader:
             face = "face_normals" in p and self.attr(p["face_normals"], "value") == "true"
             if face:
                 nrm = None
-            elif nrm is None:
-                self.warn(el, "Mitsuba computes smooth vertex normals for this OBJ (it has no vn and "
-                              "face_normals is off); the tracer shades it flat")
+            elif nrm is None:  # Mitsuba computes smooth normals for an OBJ without vn, in world space
+                smooth = True
         elif kind == "rectangle":
             tri = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]], float)
             uv = np.array([[[0, 1], [1, 1], [1, 0]], [[0, 1], [1, 0], [0, 0]]], float)  # Mitsuba's (u, 1 - v)
@@ -512,6 +543,8 @@ class _Reader:
             nrm = nrm @ np.linalg.inv(m[:3, :3])  # normals by the inverse transpose
             if flip:
                 nrm = -nrm
+        elif smooth:
+            nrm = vertex_normals(tri)
         # material: the shape's BSDF (a shared one is one material), with its emission if any
         b = [c for c in el if c.tag in ("bsdf", "ref")]
         bel = None
