@@ -338,3 +338,20 @@ def test_obj_without_normals_gets_mitsubas_smooth_normals(tmp_path):
     np.testing.assert_allclose(ours.tri_vn.reshape(-1, 3), nrm[idx], atol=2e-5)
     (tmp_path / "s.xml").write_text(xml.replace("FACE", '<boolean name="face_normals" value="true"/>'))
     assert tracer.load_scene(str(tmp_path / "s.xml")).tri_vn.shape[0] == 0
+
+
+def test_define_overrides_defaults_from_the_command_line(tmp_path, capsys):
+    """`-D res=12 --define spp=2` replace the XML's <default> values (the film width, the sampler's
+    spp) as `mitsuba -D` does; a define without '=' and a define on an OBJ scene are one error line
+    each, exit 2."""
+    from tests.test_cli import CORNELL, fails_with, run_cli
+    from tracer.imageio import read_image
+
+    path = _write(tmp_path)
+    out = tmp_path / "o.exr"
+    code, _, err = run_cli(capsys, path, "-D", "res=12", "--define", "spp=2", "-o", out, "--quiet")
+    assert code == 0, err
+    img = read_image(str(out))
+    assert img.shape[:2] == (16, 12)
+    fails_with(capsys, [path, "--define", "res"], "--define 'res'", "NAME=VALUE")
+    fails_with(capsys, [CORNELL, "-D", "res=12"], "define", "Mitsuba scene XML")

@@ -58,6 +58,8 @@ def _parser():
     p.add_argument("--seed", type=int, help="random seed (default: the scene's, else 0)")
     p.add_argument("--width", type=int, help="image width (default: the scene's)")
     p.add_argument("--height", type=int, help="image height (default: the scene's)")
+    p.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a Mitsuba scene XML's <default> NAME (as mitsuba -D); repeatable")
     p.add_argument("--accel", default="embree", help=f"ray queries: {' or '.join(ACCELS)} (default embree)")
     p.add_argument("--filter", default="box", help="pixel filter: box (default) or point (pixel centres)")
     p.add_argument("--crop", help="render only the window x0,y0,w,h of the image")
@@ -254,6 +256,12 @@ def _run(argv, warnings):
     _check_numbers(args)
     crop = _crop(args.crop)
     overrides = {k: getattr(args, k) for k in ("width", "height") if getattr(args, k) is not None}
+    define = {}
+    for d in args.define:
+        name, eq, value = d.partition("=")
+        if not eq or not name.strip():
+            raise TracerError(f"--define {d!r}: expected NAME=VALUE")
+        define[name.strip()] = value
     out = args.output or os.path.splitext(os.path.basename(args.scene))[0] + ".exr"
     from .bvh import ACCELS
     from .errors import unknown_name
@@ -280,7 +288,7 @@ def _run(argv, warnings):
             _compile_notice(guide_name, args.accel)
             notice[0] = False
 
-    scene = load_scene(args.scene, before_framing=compile_notice, **overrides)
+    scene = load_scene(args.scene, before_framing=compile_notice, define=define or None, **overrides)
     crop = _check_crop(crop, scene.width, scene.height) if crop is not None else None
     if ref is not None:
         if ref.shape[:2] != (scene.height, scene.width):

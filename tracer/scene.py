@@ -165,8 +165,9 @@ class SceneSpec:
     textures: list = field(default_factory=list)
 
 
-def load_scene(path, before_framing=None, **overrides):
-    """Load a scene; keyword overrides replace sidecar values (width, height, spp, ...).
+def load_scene(path, before_framing=None, define=None, **overrides):
+    """Load a scene; keyword overrides replace sidecar values (width, height, spp, ...); `define`
+    ({name: value}) overrides a Mitsuba scene XML's <default> values, as `mitsuba -D`.
 
     Raises SceneError (one line, naming the file and the problem) for bad input. A scene without
     a camera is framed (tracer.framing: tiny renders, which compile the kernels on first use);
@@ -182,7 +183,9 @@ def load_scene(path, before_framing=None, **overrides):
     warnings = []
     ext = os.path.splitext(path)[1].lower()
     if ext == ".xml":
-        return _load_mitsuba(path, before_framing, overrides)
+        return _load_mitsuba(path, before_framing, overrides, define)
+    if define:
+        raise SettingsError(f"{path}: define ({', '.join(define)}) is for Mitsuba scene XML files")
     if ext == ".json":
         sidecar_path = path
         sidecar = read_sidecar(path)
@@ -254,13 +257,14 @@ def prepare_coats(materials, textures):
     materials.param, materials.table = prepare(materials.type, materials.param, kd, ks)
 
 
-def _load_mitsuba(path, before_framing, overrides):
-    """load_scene for a Mitsuba scene XML (tracer.readers.mitsuba), with the keyword overrides."""
+def _load_mitsuba(path, before_framing, overrides, define=None):
+    """load_scene for a Mitsuba scene XML (tracer.readers.mitsuba), with the keyword overrides and
+    the <default> values `define` replaces."""
     from .readers.mitsuba import read_mitsuba_scene
 
     if not os.path.exists(path):
         raise SceneError(f"{path}: scene file not found")
-    spec = read_mitsuba_scene(path)
+    spec = read_mitsuba_scene(path, {str(k): str(v) for k, v in (define or {}).items()})
     for key, value in overrides.items():
         if key in ("width", "height"):
             setattr(spec, key, int(value))

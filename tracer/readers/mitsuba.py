@@ -6,14 +6,13 @@ The subset the field's scenes use most, for now: `<default>` and `$name`; `<bsdf
 `specular_reflectance`), `dielectric`, `roughdielectric` (GGX), `thindielectric`, `plastic` and
 `roughplastic` (COATED, `nonlinear`; indices as numbers or Mitsuba's named media), `mask` (an
 opacity value or texture: params[P_CLEAR]) and `bumpmap` (a height texture and its scale) around
-any of them; textures
-`bitmap` and `checkerboard` with a `to_uv` scale/translate/matrix; shapes `obj` (with `to_world`,
-`face_normals`, `flip_normals`; without vn, Mitsuba's smooth normals), `rectangle`, `cube`,
-`sphere`, `disk`, `cylinder` (tessellated, area exact), an `area` emitter on a shape, a `constant`
-emitter; the `perspective`
-sensor (`fov`, `fov_axis` x, y, diagonal, smaller, larger, `to_world` as a matrix or lookat), the film's size, the
-integrator's `max_depth` and the sampler's `sample_count`. Everything else is one warning naming
-the file and line (a shape or BSDF it cannot read is left out or replaced, as the warning says).
+any of them; textures `bitmap` and `checkerboard` with a `to_uv` scale/translate/matrix; shapes
+`obj` (with `to_world`, `face_normals`, `flip_normals`; without vn, Mitsuba's smooth normals),
+`rectangle`, `cube`, `sphere`, `disk`, `cylinder` (tessellated, area exact), an `area` emitter on
+a shape, a `constant` emitter; the `perspective` sensor (`fov`, `fov_axis` x, y, diagonal,
+smaller, larger, `to_world` as a matrix or lookat), the film's size, the integrator's `max_depth`
+and the sampler's `sample_count`. Everything else is one warning naming the file and line (a
+shape or BSDF it cannot read is left out or replaced, as the warning says).
 
 UVs: the OBJ reader keeps OBJ's v (up the image); Mitsuba's textures read (u, 1 - v), so a
 texture's `to_uv` is composed with that flip here, and a rectangle's UVs are given in OBJ's
