@@ -355,3 +355,34 @@ def test_define_overrides_defaults_from_the_command_line(tmp_path, capsys):
     assert img.shape[:2] == (16, 12)
     fails_with(capsys, [path, "--define", "res"], "--define 'res'", "NAME=VALUE")
     fails_with(capsys, [CORNELL, "-D", "res=12"], "define", "Mitsuba scene XML")
+
+
+def test_bitmap_gamma_and_raw(tmp_path):
+    """A bitmap's 0.6 `gamma` (1: stored linear; 2.2: the power law; -1: sRGB) and Mitsuba 3's
+    `raw` (no decoding) against the 8-bit texels decoded here; without either, sRGB."""
+    import OpenImageIO as oiio
+
+    px = np.random.default_rng(2).integers(0, 256, (4, 4, 3), dtype=np.uint8)
+    out = oiio.ImageOutput.create(str(tmp_path / "t.png"))
+    out.open(str(tmp_path / "t.png"), oiio.ImageSpec(4, 4, 3, "uint8"))
+    out.write_image(px)
+    out.close()
+    kinds = {"G1": '<float name="gamma" value="1"/>', "G22": '<float name="gamma" value="2.2"/>',
+             "GS": '<float name="gamma" value="-1"/>', "RAW": '<boolean name="raw" value="true"/>', "AUTO": ""}
+    bsdfs_xml = "".join(f'<bsdf type="diffuse" id="{k}"><texture name="reflectance" type="bitmap">'
+                        f'<string name="filename" value="t.png"/>{v}</texture></bsdf>' for k, v in kinds.items())
+    shapes = "".join(f'<shape type="rectangle"><transform name="to_world"><translate z="{-i}"/></transform>'
+                     f'<ref id="{k}"/></shape>' for i, k in enumerate(kinds))
+    (tmp_path / "g.xml").write_text(f"""<scene version="0.6.0">{bsdfs_xml}{shapes}
+        <shape type="rectangle"><transform name="toWorld"><translate z="3"/></transform>
+        <emitter type="area"/></shape></scene>""")
+    scene = tracer.load_scene(str(tmp_path / "g.xml"))
+    v = px / 255.0
+    srgb = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+    expect = {"G1": v, "G22": v ** 2.2, "GS": srgb, "RAW": v, "AUTO": srgb}
+    m, tex = scene.materials, scene.textures
+    for k, want in expect.items():
+        row = tex.info[m.tex[m.names.index(k), 0]]
+        o, w, h = (int(x) for x in row[1:4])
+        got = tex.data[o:o + w * h * 3].reshape(h, w, 3)
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6, err_msg=k)

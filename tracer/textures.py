@@ -33,6 +33,7 @@ class TextureSpec:
     uv: tuple = IDENTITY_UV
     fallback: tuple = (0.5, 0.5, 0.5)
     where: str = ""
+    gamma: float = 0.0  # 8/16-bit decoding: 0 (or -1) sRGB, g > 0 the power law v^g (1: linear)
 
 
 @dataclass
@@ -68,10 +69,11 @@ def srgb_decode(x):
     return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
-def read_texture(path):
-    """(H, W, 3) float32 linear RGB of an image file: 8/16-bit formats decoded from sRGB, float
-    formats as they are; grey images repeated to RGB, alpha dropped. Raises SceneError naming the
-    file."""
+def read_texture(path, gamma=0.0):
+    """(H, W, 3) float32 linear RGB of an image file: 8/16-bit formats decoded from sRGB (gamma 0
+    or -1) or by the power law v^gamma (gamma > 0; 1: stored linear, as Mitsuba's `gamma` and
+    `raw` say), float formats as they are; grey images repeated to RGB, alpha dropped. Raises
+    SceneError naming the file."""
     import OpenImageIO as oiio
 
     from .imageio import read_image
@@ -86,6 +88,8 @@ def read_texture(path):
     rgb = np.repeat(img[:, :, :1], 3, axis=2) if c < 3 else img[:, :, :3]
     if not np.all(np.isfinite(rgb)):
         raise SceneError(f"{path}: texture holds non-finite values")
+    if integer and gamma > 0.0:
+        return np.ascontiguousarray(np.power(np.clip(rgb, 0.0, None), gamma), dtype=np.float32)
     return srgb_decode(rgb) if integer else np.ascontiguousarray(rgb, dtype=np.float32)
 
 
@@ -107,17 +111,18 @@ def build_textures(specs, warnings):
         if sp.kind != "bitmap":
             info[k, 0] = TEX_CONSTANT
             continue
-        if sp.path not in cache:
+        key = (sp.path, sp.gamma if sp.gamma > 0.0 else 0.0)
+        if key not in cache:
             try:
-                img = read_texture(sp.path)
+                img = read_texture(sp.path, sp.gamma)
             except SceneError as e:
                 warn(warnings, f"{sp.where}: {e}; using the constant {_fmt(sp.fallback)} instead", logging.WARNING)
-                cache[sp.path] = None
+                cache[key] = None
             else:
-                cache[sp.path] = (offset, img.shape[1], img.shape[0])
+                cache[key] = (offset, img.shape[1], img.shape[0])
                 chunks.append(img.reshape(-1))
                 offset += img.size
-        got = cache[sp.path]
+        got = cache[key]
         if got is None:
             info[k, 0] = TEX_CONSTANT
             info[k, 10:13] = sp.fallback

@@ -6,7 +6,7 @@ The subset the field's scenes use most, for now: `<default>` and `$name`; `<bsdf
 `specular_reflectance`), `dielectric`, `roughdielectric` (GGX), `thindielectric`, `plastic` and
 `roughplastic` (COATED, `nonlinear`; indices as numbers or Mitsuba's named media), `mask` (an
 opacity value or texture: params[P_CLEAR]) and `bumpmap` (a height texture and its scale) around
-any of them; textures `bitmap` and `checkerboard` with a `to_uv` scale/translate/matrix; shapes
+any of them; textures `bitmap` (0.6's `gamma`, 3's `raw`) and `checkerboard` with a `to_uv` scale/translate/matrix; shapes
 `obj` (with `to_world`, `face_normals`, `flip_normals`; without vn, Mitsuba's smooth normals),
 `rectangle`, `cube`, `sphere`, `disk`, `cylinder` (tessellated, area exact), an `area` emitter on
 a shape, a `constant` emitter; the `perspective` sensor (`fov`, `fov_axis` x, y, diagonal,
@@ -385,8 +385,11 @@ class _Reader:
         if kind == "bitmap":
             m = flip @ m  # our bitmap lookup flips v back (rows from the top at v' = 1)
             file = self.attr(p["filename"], "value") if "filename" in p else ""
+            gamma = self.number(p["gamma"]) if "gamma" in p else 0.0  # 0.6: 1 linear, -1 sRGB
+            if "raw" in p and self.attr(p["raw"], "value") == "true":  # Mitsuba 3: no sRGB decoding
+                gamma = 1.0
             return TextureSpec("bitmap", os.path.join(self.folder, file), uv=tuple(m[:2].reshape(-1)),
-                               fallback=(0.5, 0.5, 0.5), where=self.where(el))
+                               fallback=(0.5, 0.5, 0.5), where=self.where(el), gamma=gamma)
         if kind == "checkerboard":
             c0 = self.rgb(p["color0"]) if "color0" in p else (0.4, 0.4, 0.4)
             c1 = self.rgb(p["color1"]) if "color1" in p else (0.2, 0.2, 0.2)
