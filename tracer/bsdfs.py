@@ -582,15 +582,7 @@ def _metal_sample(prm, wo, u0, u1):
         return (-wo[0], -wo[1], wo[2]), _metal_f(prm, w[2]), 1.0, True
     alpha = max(alpha, ALPHA_MIN)
     beck = int(prm[14]) & BECKMANN
-    if beck:
-        # D(h) cos(h): tan^2 = -a^2 log(1 - u0)
-        t2 = -alpha * alpha * math.log(1.0 - u0)
-        c = 1.0 / math.sqrt(1.0 + t2)
-        sn = math.sqrt(max(0.0, 1.0 - c * c))
-        phi = 2.0 * math.pi * u1
-        h = (sn * math.cos(phi), sn * math.sin(phi), c)
-    else:
-        h = sample_ggx_vndf(w, alpha, u0, u1)
+    h = _sample_normal(w, alpha, beck, u0, u1)
     cos_oh = dot(w, h)
     wl = _reflect(w, h)
     if cos_oh <= 0.0 or wl[2] <= 0.0:
@@ -601,6 +593,19 @@ def _metal_sample(prm, wo, u0, u1):
     fc = _metal_fcos(prm, w, wl, h, alpha, beck)
     wi = (wl[0], wl[1], wl[2] if wo[2] > 0.0 else -wl[2])
     return wi, _scale3(fc, 1.0 / pdf), pdf, False
+
+
+@jit
+def _sample_normal(w, alpha, beck, u0, u1):
+    """A microfacet normal for METAL and COATED: GGX's visible normals from w, or Beckmann's D(h)
+    cos(h) (tan^2 = -a^2 log(1 - u0)); densities in _metal_pdf_h."""
+    if beck:
+        t2 = -alpha * alpha * math.log(1.0 - u0)
+        c = 1.0 / math.sqrt(1.0 + t2)
+        sn = math.sqrt(max(0.0, 1.0 - c * c))
+        phi = 2.0 * math.pi * u1
+        return (sn * math.cos(phi), sn * math.sin(phi), c)
+    return sample_ggx_vndf(w, alpha, u0, u1)
 
 
 @jit
@@ -715,14 +720,7 @@ def _coated_sample(prm, table, wo, u0, u1, u2):
             f = fresnel_dielectric(w[2], prm[7])[0] / ps
             return (-wo[0], -wo[1], wo[2]), (prm[3] * f, prm[4] * f, prm[5] * f), ps, True
         alpha = max(prm[6], ALPHA_MIN)
-        if int(prm[14]) & BECKMANN:
-            t2 = -alpha * alpha * math.log(1.0 - u0)
-            c = 1.0 / math.sqrt(1.0 + t2)
-            sn = math.sqrt(max(0.0, 1.0 - c * c))
-            phi = 2.0 * math.pi * u1
-            h = (sn * math.cos(phi), sn * math.sin(phi), c)
-        else:
-            h = sample_ggx_vndf(w, alpha, u0, u1)
+        h = _sample_normal(w, alpha, int(prm[14]) & BECKMANN, u0, u1)
         wl = _reflect(w, h)
         if dot(w, h) <= 0.0 or wl[2] <= 0.0:
             return _fail()
