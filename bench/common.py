@@ -9,16 +9,18 @@ from .reference import ROOT, default_out, load
 
 
 def scene_path(name, scene_dir=None):
-    """Path of the OBJ for a scene name (built-in first, then scene_dir/<name>/scene.obj)."""
-    if name.endswith(".obj") or name.endswith(".json"):
+    """Path of the scene file for a scene name (built-in first, then scene_dir/<name>/scene.obj or
+    scene_dir/<name>/scene.xml, a Mitsuba scene)."""
+    if name.endswith((".obj", ".json", ".xml")):
         return name
     own = os.path.join(ROOT, "scenes", name, f"{name}.obj")
     if os.path.isfile(own):
         return own
     if scene_dir:
-        ext = os.path.join(scene_dir, name, "scene.obj")
-        if os.path.isfile(ext):
-            return ext
+        for file in ("scene.obj", "scene.xml"):
+            ext = os.path.join(scene_dir, name, file)
+            if os.path.isfile(ext):
+                return ext
     raise SystemExit(f"bench.convergence: no scene {name!r} in scenes/"
                      + (f" or {scene_dir}" if scene_dir else " (external scenes need --scene-dir)"))
 

@@ -383,7 +383,8 @@ def main(argv=None):
                    "(none: spp budgets only, given by --spp)")
     p.add_argument("--spp", default=None, help="comma-separated spp budgets (default: what bsdf reached; none: time budgets only)")
     p.add_argument("--seeds", type=int, default=3)
-    p.add_argument("--scene-dir", default=None, help="folder of external scenes (<dir>/<name>/scene.obj)")
+    p.add_argument("--scene-dir", default=None, help="folder of external scenes (<dir>/<name>/scene.obj "
+                   "or scene.xml)")
     p.add_argument("--out", default=DEFAULT_OUT)
     p.add_argument("--rescore", action="store_true", help="render nothing: score the run stored in --out "
                    "again against the current references")
@@ -408,11 +409,11 @@ def main(argv=None):
     log = os.path.join(a.out, "records.jsonl")
     for i, given in enumerate(scenes):
         path = scene_path(given, a.scene_dir)
-        name = os.path.splitext(os.path.basename(given))[0] if given.endswith((".obj", ".json")) else given
+        name = os.path.splitext(os.path.basename(given))[0] if given.endswith((".obj", ".json", ".xml")) else given
         scenes[i] = name
         ref, _, ref_meta = reference_for(path)
         floors[name] = ref_meta["noise_floor_relmse"]
-        scene = tracer.load_scene(path)
+        scene = tracer.load_scene(path, width=ref_meta["width"], height=ref_meta["height"])  # the reference's size
         images = os.path.join(a.out, "images", name)
         tracer.render(scene, spp=1)  # compile and warm up outside every budget
         recs = []

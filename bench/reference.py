@@ -53,6 +53,8 @@ def default_out(scene_path):
     if p.startswith(os.path.join(ROOT, "scenes") + os.sep):
         return os.path.dirname(p)
     name = os.path.basename(os.path.dirname(p)) or os.path.splitext(os.path.basename(p))[0]
+    if p.endswith(".xml"):  # a Mitsuba scene: kept apart from an OBJ version of the same scene
+        name += "-mitsuba"
     return os.path.join(ROOT, "bench", "results", "references", name)
 
 
@@ -117,6 +119,8 @@ def main(argv=None):
     budget.add_argument("--time", type=float, help="seconds of rendering")
     p.add_argument("--seed", type=int, default=1000, help="seed of the first render (appends use the next)")
     p.add_argument("--out", default=None)
+    p.add_argument("--width", type=int, help="image width (default: the scene's)")
+    p.add_argument("--height", type=int, help="image height (default: the scene's)")
     p.add_argument("--append", action="store_true", help="merge with the reference already in --out")
     p.add_argument("--force", action="store_true", help="with --append: merge even if the new segment "
                    "disagrees with the stored mean")
@@ -124,7 +128,8 @@ def main(argv=None):
     command = "python -m bench.reference " + " ".join(argv if argv is not None else sys.argv[1:])
     out = a.out or default_out(a.scene)
     os.makedirs(out, exist_ok=True)
-    scene = tracer.load_scene(a.scene)
+    size = {k: v for k, v in (("width", a.width), ("height", a.height)) if v}
+    scene = tracer.load_scene(a.scene, **size)
     old = None
     seed = a.seed
     if a.append and os.path.isfile(os.path.join(out, "reference.exr")):

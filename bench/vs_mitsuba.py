@@ -1,77 +1,223 @@
-"""One Mitsuba scene XML rendered by the tracer and by Mitsuba 3 (`scalar_rgb`), compared.
+"""Mitsuba scene XML files rendered by the tracer and by Mitsuba 3 (`scalar_rgb`), compared.
 
-    python -m bench.vs_mitsuba ../shared/scenes-mitsuba/veach-ajar/scene.xml --width 160 --height 90 --spp 1024
+    python -m bench.vs_mitsuba --scene-dir ../shared/scenes-mitsuba --scenes cornell-box,veach-mis \\
+        --width 320 --height 180 --spp 64 --seeds 4 --out bench/summary/mitsuba_scenes/table.md
+    python -m bench.vs_mitsuba path/to/scene.xml --spp 256
 
-Both render at the same size and spp, with the box pixel filter (the scene's filter is replaced in
-a copy of the XML, so that pixels mean the same thing), Mitsuba with `--seeds` independent seeds.
-Printed: each renderer's image mean per channel with its standard error (ours from the film's
-per-pixel variances, Mitsuba's from the spread of its seeds), the z-score of their difference,
-and the relative MSE of our image against Mitsuba's mean image beside the relMSE of one Mitsuba
-seed against the others' mean (the noise floor at this spp), plus both times. Needs mitsuba
-(pip install -e ".[mitsuba]").
+Mitsuba 3 renders a copy of each file that it can load (`mitsuba_copy`: what it rejects is dropped
+or mapped the way the tracer reads it, e.g. 0.6's `extEta` folded into eta and k, `gamma` on a
+bitmap to `raw`, `roughdiffuse` to diffuse, trilinear filtering to bilinear, a rotation axis
+normalised, the pixel filter set to box on both sides). Both render at the same size, spp and
+depth, each with `--seeds` independent seeds. Printed per scene: each renderer's image mean per
+channel with its standard error (from the spread of the seeds), the z-score of the difference and
+the relative difference; and the per-pixel excess: relMSE between the two renderers' mean images
+over the relMSE their own noise explains (each pixel's variance of the mean, from its seeds), so
+1 is agreement and 1.3 is 30% more error than noise. Needs mitsuba (pip install -e ".[mitsuba]").
 """
 import argparse
 import os
-import re
 import sys
 import tempfile
 import time
+import xml.etree.ElementTree as ET
 
 import numpy as np
 
 import tracer
-from tracer.metrics import relmse
+from bench.atomic import write_text
+from tracer.metals import METALS
+
+EPS = 0.01  # relMSE's epsilon (tracer.metrics.relmse)
 
 
-def mitsuba_render(path, width, height, spp, seeds):
+def _named(el, *names):
+    return [c for c in el if c.get("name") in names]
+
+
+def mitsuba_copy(path, folder, allow_missing=False, size=None):
+    """Write a copy of the scene XML `path` that Mitsuba 3 loads into `folder`; return its path and
+    the list of changes. Relative file names are made absolute (the copy lives elsewhere); size
+    (width, height) replaces the film's."""
+    src = os.path.dirname(os.path.abspath(path))
+    tree = ET.parse(path)
+    root = tree.getroot()
+    notes = []
+    parent = {c: p for p in root.iter() for c in p}
+
+    def note(msg):
+        if msg not in notes:
+            notes.append(msg)
+
+    for inc in root.iter("include"):
+        note("an <include> is kept as is (its file is not rewritten)")
+    for s in list(root.iter("string")):
+        if s.get("name") == "filename" and not os.path.isabs(s.get("value", "")) and "$" not in s.get("value", ""):
+            file = os.path.join(src, s.get("value"))
+            s.set("value", file)
+            owner = parent[s]
+            if not os.path.exists(file) and allow_missing:
+                if owner.tag == "shape":  # the tracer leaves the shape out
+                    parent[owner].remove(owner)
+                    note("shapes whose mesh file is absent are left out")
+                elif owner.tag == "texture":  # the tracer reads the constant 0.5
+                    up = parent[owner]
+                    i = list(up).index(owner)
+                    up.remove(owner)
+                    up.insert(i, ET.Element("rgb", name=owner.get("name", "reflectance"), value="0.5"))
+                    note("absent textures are the constant 0.5")
+    for el in root.iter():
+        kind = el.get("type")
+        if el.tag == "film":
+            for c in _named(el, "width", "height"):
+                if size:
+                    c.set("value", str(size[0] if c.get("name") == "width" else size[1]))
+            for c in _named(el, "gamma"):
+                el.remove(c)
+                note("film gamma dropped")
+            for f in el.findall("rfilter"):
+                el.remove(f)
+            el.append(ET.Element("rfilter", type="box"))
+        if el.tag == "texture" and kind == "bitmap":
+            for c in _named(el, "gamma"):
+                el.remove(c)
+                g = float(c.get("value"))
+                if g == 1.0:
+                    el.append(ET.Element("boolean", name="raw", value="true"))
+                note("bitmap gamma 1 as raw, -1 as sRGB (Mitsuba 3's default)")
+            for c in _named(el, "filterType", "filter_type"):
+                if c.get("value") not in ("bilinear", "nearest"):
+                    c.set("value", "bilinear")
+                    note("bitmap filtering trilinear/ewa as bilinear")
+        if el.tag == "bsdf" and kind in ("conductor", "roughconductor"):
+            ext = _named(el, "extEta", "ext_eta")
+            if ext:
+                e = float(ext[0].get("value"))
+                el.remove(ext[0])
+                mat = _named(el, "material")
+                eta_k = METALS[mat[0].get("value") if mat else "Cu"]
+                for j, key in enumerate(("eta", "k")):
+                    prop = _named(el, key)
+                    vals = np.array([float(x) for x in prop[0].get("value").replace(",", " ").split()]) \
+                        if prop else np.asarray(eta_k[j])
+                    vals = np.broadcast_to(vals, (3,)) / e
+                    for p in prop:
+                        el.remove(p)
+                    el.append(ET.Element("rgb", name=key, value=", ".join(f"{v:.9g}" for v in vals)))
+                for m in mat:
+                    el.remove(m)
+                note("conductor extEta folded into eta and k")
+        if el.tag == "bsdf" and kind == "roughdiffuse":
+            el.set("type", "diffuse")
+            for c in _named(el, "alpha", "useFastApprox", "use_fast_approx"):
+                el.remove(c)
+            note("roughdiffuse as diffuse")
+        if el.tag == "integrator" and kind not in ("path", "volpath", "direct") and "$" not in (kind or ""):
+            el.set("type", "path")
+            note(f"integrator {kind} as path")
+        if el.tag == "rotate":
+            a = np.array([float(el.get(k, 0)) for k in "xyz"])
+            if abs(np.linalg.norm(a) - 1) > 1e-6:
+                for k, v in zip("xyz", a / np.linalg.norm(a)):
+                    el.set(k, f"{v:.12g}")
+                note("rotation axes normalised")
+        if el.tag == "srgb":
+            v = np.array([float(x) for x in el.get("value").replace(",", " ").split()])
+            el.tag = "rgb"
+            el.set("value", ", ".join(f"{x:.9g}" for x in np.where(v <= 0.04045, v / 12.92,
+                                                                       ((v + 0.055) / 1.055) ** 2.4)))
+    out = os.path.join(folder, os.path.basename(path))
+    tree.write(out)
+    return out, notes
+
+
+def mitsuba_render(path, width, height, spp, seeds, allow_missing=False):
+    """(seeds, H, W, 3) Mitsuba 3 images of the scene's copy, total seconds, the copy's notes."""
     import mitsuba as mi
 
     mi.set_variant("scalar_rgb")
-    text = open(path, encoding="utf-8").read()
-    text = re.sub(r'<rfilter\s+type="[a-z]+"\s*/>', '<rfilter type="box"/>', text)
-    folder = os.path.dirname(os.path.abspath(path))
-    mi.file_resolver().append(folder)
-    with tempfile.NamedTemporaryFile("w", suffix=".xml", delete=False) as f:
-        f.write(text)
-    try:
+    with tempfile.TemporaryDirectory() as d:
+        copy, notes = mitsuba_copy(path, d, allow_missing, (width, height))
+        mi.file_resolver().append(os.path.dirname(os.path.abspath(path)))
         t0 = time.perf_counter()
-        scene = mi.load_file(f.name, resx=width, resy=height)
+        scene = mi.load_file(copy)
         imgs = [np.array(mi.render(scene, spp=spp, seed=s))[:, :, :3] for s in range(seeds)]
-        return np.stack(imgs), time.perf_counter() - t0
-    finally:
-        os.unlink(f.name)
+    return np.stack(imgs).astype(np.float64), time.perf_counter() - t0, notes
+
+
+def compare(ours, theirs):
+    """{mean_*, se_*, z, rel, relmse, expected, excess} of two stacks of seed images."""
+    s = ours.shape[0]
+    out = {}
+    for name, st in (("ours", ours), ("mi", theirs)):
+        means = st.reshape(st.shape[0], -1, 3).mean(axis=1)
+        out[f"mean_{name}"] = means.mean(axis=0)
+        out[f"se_{name}"] = means.std(axis=0, ddof=1) / np.sqrt(st.shape[0])
+    out["z"] = (out["mean_ours"] - out["mean_mi"]) / np.sqrt(out["se_ours"] ** 2 + out["se_mi"] ** 2)
+    out["rel"] = out["mean_ours"] / out["mean_mi"] - 1
+    mo, mm = ours.mean(axis=0), theirs.mean(axis=0)
+    ref2 = mm * mm + EPS
+    var = ours.var(axis=0, ddof=1) / s + theirs.var(axis=0, ddof=1) / theirs.shape[0]
+    out["relmse"] = float(np.mean((mo - mm) ** 2 / ref2))
+    out["expected"] = float(np.mean(var / ref2))
+    out["excess"] = out["relmse"] / out["expected"]
+    return out
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("scene")
-    ap.add_argument("--width", type=int, default=160)
-    ap.add_argument("--height", type=int, default=90)
-    ap.add_argument("--spp", type=int, default=256)
-    ap.add_argument("--seeds", type=int, default=4, help="Mitsuba renders (its standard error comes from their spread)")
+    ap.add_argument("scene", nargs="*", help="scene XML files")
+    ap.add_argument("--scene-dir", help="a folder of <name>/scene.xml")
+    ap.add_argument("--scenes", help="comma-separated names under --scene-dir (default: all)")
+    ap.add_argument("--width", type=int, default=320)
+    ap.add_argument("--height", type=int, default=180)
+    ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--seeds", type=int, default=4, help="renders per side (standard errors from their spread)")
+    ap.add_argument("--out", help="write the table (markdown) here")
     a = ap.parse_args(argv)
-    scene = tracer.load_scene(a.scene, width=a.width, height=a.height)
-    t0 = time.perf_counter()
-    r = tracer.render(scene, spp=a.spp, seed=1, pixel_filter="box")
-    t_ours = time.perf_counter() - t0
-    mine = r.image.astype(np.float64)
-    n = mine.shape[0] * mine.shape[1]
-    m_ours = mine.reshape(-1, 3).mean(axis=0)
-    se_ours = np.sqrt(r.variance.astype(np.float64).reshape(-1, 3).sum(axis=0)) / n
-    theirs, t_mi = mitsuba_render(a.scene, a.width, a.height, a.spp, a.seeds)
-    means = theirs.reshape(a.seeds, -1, 3).mean(axis=1)
-    m_mi = means.mean(axis=0)
-    se_mi = means.std(axis=0, ddof=1) / np.sqrt(a.seeds)
-    z = (m_ours - m_mi) / np.sqrt(se_ours ** 2 + se_mi ** 2)
-    ref = theirs.mean(axis=0)
-    floor = np.mean([relmse(theirs[k], (ref * a.seeds - theirs[k]) / (a.seeds - 1)) for k in range(a.seeds)])
-    print(f"{a.scene}: {a.width}x{a.height}, {a.spp} spp, {len(scene.warnings)} warnings")
-    for name, m, se, t in (("tracer", m_ours, se_ours, t_ours), ("mitsuba", m_mi, se_mi, t_mi / a.seeds)):
-        print(f"  {name:8s} mean {np.array2string(m, precision=5)} +- {np.array2string(se, precision=5)}  ({t:.1f} s per render)")
-    print(f"  z per channel {np.array2string(z, precision=2)}; relative difference of the means "
-          f"{np.array2string(m_ours / m_mi - 1, precision=4)}")
-    print(f"  relMSE tracer vs Mitsuba's mean image {relmse(mine, ref):.4g}; one Mitsuba seed vs the rest {floor:.4g}")
-    return 0
+    paths = list(a.scene)
+    if a.scene_dir:
+        names = a.scenes.split(",") if a.scenes else sorted(
+            n for n in os.listdir(a.scene_dir) if os.path.isfile(os.path.join(a.scene_dir, n, "scene.xml")))
+        paths += [os.path.join(a.scene_dir, n, "scene.xml") for n in names]
+    rows = []
+    for path in paths:
+        name = os.path.basename(os.path.dirname(os.path.abspath(path)))
+        scene = tracer.load_scene(path, width=a.width, height=a.height, allow_missing=True)
+        t0 = time.perf_counter()
+        ours = np.stack([tracer.render(scene, spp=a.spp, seed=100 + k, pixel_filter="box").image
+                         for k in range(a.seeds)]).astype(np.float64)
+        t_ours = (time.perf_counter() - t0) / a.seeds
+        theirs, t_mi, notes = mitsuba_render(path, a.width, a.height, a.spp, a.seeds, allow_missing=True)
+        c = compare(ours, theirs)
+        ok = bool(np.all((np.abs(c["rel"]) <= 0.005) | (np.abs(c["z"]) <= 4)) and c["excess"] <= 1.3)
+        rows.append((name, c, t_ours, t_mi / a.seeds, notes, ok, scene.render.max_depth))
+        print(f"{name}: {a.width}x{a.height}, {a.spp} spp x {a.seeds} seeds, max_depth {scene.render.max_depth}")
+        for who in ("ours", "mi"):
+            print(f"  {who:4s} mean {np.array2string(c['mean_' + who], precision=5)} "
+                  f"+- {np.array2string(c['se_' + who], precision=5)}")
+        print(f"  z {np.array2string(c['z'], precision=2)}, relative difference "
+              f"{np.array2string(c['rel'] * 100, precision=3)} %")
+        print(f"  relMSE of the means {c['relmse']:.4g}, explained by noise {c['expected']:.4g}: "
+              f"excess {c['excess']:.3f}  ({'agrees' if ok else 'DIFFERS'}); {t_ours:.1f} s vs "
+              f"{t_mi / a.seeds:.1f} s per render")
+        for n in notes:
+            print(f"  copy for Mitsuba: {n}")
+        sys.stdout.flush()
+    if a.out:
+        lines = [f"Tracer vs Mitsuba 3.9.1 `scalar_rgb` on the same scene files: {a.width}x{a.height}, {a.spp} spp, "
+                 f"{a.seeds} seeds per side, box filter. Command: `python -m bench.vs_mitsuba "
+                 f"{' '.join(argv if argv is not None else sys.argv[1:])}`.", "",
+                 "| scene | max depth | mean, ours (rgb) | mean, Mitsuba | difference % | z | excess | agrees | "
+                 "s/render ours, Mitsuba | Mitsuba's copy |",
+                 "|---|---|---|---|---|---|---|---|---|---|"]
+        f3 = lambda v, p=4: " ".join(f"{x:.{p}f}" for x in v)  # noqa: E731
+        for name, c, t_o, t_m, notes, ok, depth in rows:
+            lines.append(f"| {name} | {depth} | {f3(c['mean_ours'])} | {f3(c['mean_mi'])} | {f3(c['rel'] * 100, 2)} | "
+                         f"{f3(c['z'], 1)} | {c['excess']:.3f} | {'yes' if ok else 'no'} | {t_o:.1f}, {t_m:.1f} | "
+                         f"{'; '.join(notes) or '-'} |")
+        os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
+        write_text(a.out, "\n".join(lines) + "\n")
+    return 0 if all(r[5] for r in rows) else 1
 
 
 if __name__ == "__main__":

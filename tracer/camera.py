@@ -4,7 +4,7 @@ Image right is cross(forward, up); image row 0 is the top. `fov` is the full fie
 view in degrees along `fov_axis` ("x": the image width, "y": the height).
 """
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -22,6 +22,7 @@ class Camera:
     tan_y: float  # tan of half the vertical field of view
     fov: float
     fov_axis: str
+    near: float = 0.0  # rays start on the plane this far ahead (Mitsuba's near_clip)
 
     @staticmethod
     def look_at(origin, target, up, fov, fov_axis, width, height, where="camera"):
@@ -63,7 +64,7 @@ class Camera:
             raise SceneError(f"{where}: the camera's up (+y) is parallel to its viewing direction (+z)")
         cam = Camera.look_at(m[:3, 3], m[:3, 3] + f, u, fov, fov_axis, width, height, where=where)
         if np.dot(cam.right, cols[0]) > 0.0:  # a mirrored frame: the image's right is the frame's -x still
-            cam = Camera(cam.origin, cam.forward, -cam.right, cam.up, cam.tan_x, cam.tan_y, cam.fov, cam.fov_axis)
+            cam = replace(cam, right=-cam.right)
         return cam
 
     def resized(self, width, height):
@@ -71,12 +72,12 @@ class Camera:
         t = self.tan_x if self.fov_axis == "x" else self.tan_y
         aspect = width / height
         tan_x, tan_y = (t, t / aspect) if self.fov_axis == "x" else (t * aspect, t)
-        return Camera(self.origin, self.forward, self.right, self.up, tan_x, tan_y, self.fov, self.fov_axis)
+        return replace(self, tan_x=tan_x, tan_y=tan_y)
 
     def packed(self):
-        """(13,) float64 for kernels: origin, forward, right*tan_x, up*tan_y, (unused)."""
+        """(13,) float64 for kernels: origin, forward, right*tan_x, up*tan_y, near."""
         return np.concatenate(
-            [self.origin, self.forward, self.right * self.tan_x, self.up * self.tan_y, [0.0]]
+            [self.origin, self.forward, self.right * self.tan_x, self.up * self.tan_y, [self.near]]
         ).astype(np.float64)
 
     def __repr__(self):
@@ -87,11 +88,13 @@ class Camera:
 
 @jit
 def camera_ray(cam, width, height, px, py, jx, jy):
-    """World-space ray through image point (px + jx, py + jy); returns (origin, unit dir)."""
+    """World-space ray through image point (px + jx, py + jy); returns (origin, unit dir). The
+    origin is on the near plane (cam[12] ahead; the unnormalised direction has forward part 1)."""
     sx = 2.0 * (px + jx) / width - 1.0
     sy = 1.0 - 2.0 * (py + jy) / height
     dx = cam[3] + sx * cam[6] + sy * cam[9]
     dy = cam[4] + sx * cam[7] + sy * cam[10]
     dz = cam[5] + sx * cam[8] + sy * cam[11]
     inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
-    return (cam[0], cam[1], cam[2]), (dx * inv, dy * inv, dz * inv)
+    near = cam[12]
+    return (cam[0] + near * dx, cam[1] + near * dy, cam[2] + near * dz), (dx * inv, dy * inv, dz * inv)

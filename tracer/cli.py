@@ -60,6 +60,8 @@ def _parser():
     p.add_argument("--height", type=int, help="image height (default: the scene's)")
     p.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE",
                    help="set a Mitsuba scene XML's <default> NAME (as mitsuba -D); repeatable")
+    p.add_argument("--allow-missing", action="store_true",
+                   help="render a Mitsuba scene XML whose meshes or textures are partly absent (warnings)")
     p.add_argument("--accel", default="embree", help=f"ray queries: {' or '.join(ACCELS)} (default embree)")
     p.add_argument("--filter", default="box", help="pixel filter: box (default) or point (pixel centres)")
     p.add_argument("--crop", help="render only the window x0,y0,w,h of the image")
@@ -288,7 +290,8 @@ def _run(argv, warnings):
             _compile_notice(guide_name, args.accel)
             notice[0] = False
 
-    scene = load_scene(args.scene, before_framing=compile_notice, define=define or None, **overrides)
+    scene = load_scene(args.scene, before_framing=compile_notice, define=define or None,
+                       allow_missing=args.allow_missing, **overrides)
     crop = _check_crop(crop, scene.width, scene.height) if crop is not None else None
     if ref is not None:
         if ref.shape[:2] != (scene.height, scene.width):

@@ -11,7 +11,7 @@ scene gives none) and the check that the scene has a light.
 """
 import logging
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -125,6 +125,7 @@ class CameraSpec:
     origin: np.ndarray | None = None
     target: np.ndarray | None = None
     matrix: np.ndarray | None = None
+    near: float = 0.0  # near clipping distance (Mitsuba's near_clip; 0: rays start at the eye)
     where: str = "camera"
 
     @property
@@ -165,9 +166,10 @@ class SceneSpec:
     textures: list = field(default_factory=list)
 
 
-def load_scene(path, before_framing=None, define=None, **overrides):
+def load_scene(path, before_framing=None, define=None, allow_missing=False, **overrides):
     """Load a scene; keyword overrides replace sidecar values (width, height, spp, ...); `define`
-    ({name: value}) overrides a Mitsuba scene XML's <default> values, as `mitsuba -D`.
+    ({name: value}) overrides a Mitsuba scene XML's <default> values, as `mitsuba -D`;
+    allow_missing: a Mitsuba scene's missing mesh or texture is a warning, not an error.
 
     Raises SceneError (one line, naming the file and the problem) for bad input. A scene without
     a camera is framed (tracer.framing: tiny renders, which compile the kernels on first use);
@@ -183,7 +185,7 @@ def load_scene(path, before_framing=None, define=None, **overrides):
     warnings = []
     ext = os.path.splitext(path)[1].lower()
     if ext == ".xml":
-        return _load_mitsuba(path, before_framing, overrides, define)
+        return _load_mitsuba(path, before_framing, overrides, define, allow_missing)
     if define:
         raise SettingsError(f"{path}: define ({', '.join(define)}) is for Mitsuba scene XML files")
     if ext == ".json":
@@ -257,14 +259,14 @@ def prepare_coats(materials, textures):
     materials.param, materials.table = prepare(materials.type, materials.param, kd, ks)
 
 
-def _load_mitsuba(path, before_framing, overrides, define=None):
+def _load_mitsuba(path, before_framing, overrides, define=None, allow_missing=False):
     """load_scene for a Mitsuba scene XML (tracer.readers.mitsuba), with the keyword overrides and
     the <default> values `define` replaces."""
     from .readers.mitsuba import read_mitsuba_scene
 
     if not os.path.exists(path):
         raise SceneError(f"{path}: scene file not found")
-    spec = read_mitsuba_scene(path, {str(k): str(v) for k, v in (define or {}).items()})
+    spec = read_mitsuba_scene(path, {str(k): str(v) for k, v in (define or {}).items()}, allow_missing)
     for key, value in overrides.items():
         if key in ("width", "height"):
             setattr(spec, key, int(value))
@@ -310,6 +312,7 @@ def build_scene(spec, before_framing=None):
         origin, target = (cs.origin, cs.target) if not cs.framed else \
             outside_view(bounds, cs.fov, view_axes(cs.up)[0][1])  # the default view until framing picks one
         camera = Camera.look_at(origin, target, cs.up, cs.fov, cs.fov_axis, spec.width, spec.height, where=cs.where)
+    camera = replace(camera, near=float(cs.near))
     scene = Scene(
         path=spec.path,
         tri=np.ascontiguousarray(tri),
@@ -335,6 +338,6 @@ def build_scene(spec, before_framing=None):
         if before_framing is not None:
             before_framing()
         (origin, target, view_up), scene.framing = frame_camera(scene, cs.fov, cs.fov_axis, cs.up)
-        scene.camera = Camera.look_at(origin, target, view_up, cs.fov, cs.fov_axis, spec.width, spec.height,
-                                      where=cs.where)
+        scene.camera = replace(Camera.look_at(origin, target, view_up, cs.fov, cs.fov_axis, spec.width, spec.height,
+                                              where=cs.where), near=float(cs.near))
     return scene

@@ -27,17 +27,31 @@ import numpy as np
 
 from .. import bsdfs
 from ..errors import SceneError
-from ..material import N_TEX_SLOTS, P_BUMP_SCALE, TEX_SLOT_BUMP, TEX_SLOT_KD, TEX_SLOT_KS, TEX_SLOT_OPACITY
+from ..material import (
+    N_TEX_SLOTS,
+    P_BUMP_SCALE,
+    TEX_SLOT_BUMP,
+    TEX_SLOT_KD,
+    TEX_SLOT_KS,
+    TEX_SLOT_OPACITY,
+)
 from ..metals import METALS
 from ..scene import CameraSpec, Environment, RenderSettings, SceneSpec
 from ..textures import TextureSpec
+from .meshes import read_ply, read_serialized
 from .obj import read_geometry
 from .text import warn
 
 _CAMEL = {"toWorld": "to_world", "faceNormals": "face_normals", "flipNormals": "flip_normals", "maxDepth": "max_depth",
           "sampleCount": "sample_count", "intIOR": "int_ior", "extIOR": "ext_ior", "fovAxis": "fov_axis",
           "specularReflectance": "specular_reflectance", "diffuseReflectance": "diffuse_reflectance",
-          "toUV": "to_uv", "filterType": "filter_type"}
+          "toUV": "to_uv", "filterType": "filter_type", "shapeIndex": "shape_index", "nearClip": "near_clip",
+          "farClip": "far_clip", "rrDepth": "rr_depth", "hideEmitters": "hide_emitters", "extEta": "ext_eta",
+          "flipTexCoords": "flip_tex_coords", "focalLength": "focal_length", "strictNormals": "strict_normals",
+          "maxSmoothAngle": "max_smooth_angle", "samplingWeight": "sampling_weight"}
+# film properties that only shape the output file (its format, an LDR gamma; no pixel value changes): not warned
+FILM_OUTPUT = {"gamma", "pixel_format", "file_format", "component_format", "banner", "high_quality_edges", "attach_log",
+               "pixelFormat", "fileFormat", "componentFormat", "highQualityEdges", "attachLog"}
 
 
 # Mitsuba's named indices of refraction (include/mitsuba/render/ior.h)
@@ -171,10 +185,10 @@ def _frame_to(p0, p1, r):
 
 
 class _Node:
-    """An XML element: tag, attributes (get), children (iteration), its line in the file."""
+    """An XML element: tag, attributes (get), children (iteration), its file and line."""
 
-    def __init__(self, tag, attrib, line):
-        self.tag, self.attrib, self.line, self.children = tag, attrib, line, []
+    def __init__(self, tag, attrib, path, line):
+        self.tag, self.attrib, self.path, self.line, self.children = tag, attrib, path, line, []
 
     def get(self, key, default=None):
         return self.attrib.get(key, default)
@@ -194,7 +208,7 @@ def _parse(path):
     stack, roots = [], []
 
     def start(tag, attrib):
-        node = _Node(tag, attrib, parser.CurrentLineNumber)
+        node = _Node(tag, attrib, path, parser.CurrentLineNumber)
         (stack[-1].children if stack else roots).append(node)
         stack.append(node)
 
@@ -210,9 +224,32 @@ def _parse(path):
     return roots[0]
 
 
+class _Props(dict):
+    """{property name: element}; remembers which names were asked for (the rest are unused)."""
+
+    def __init__(self, items):
+        super().__init__(items)
+        self.used = set()
+
+    def __contains__(self, key):
+        self.used.add(key)
+        return super().__contains__(key)
+
+    def __getitem__(self, key):
+        self.used.add(key)
+        return super().__getitem__(key)
+
+    def get(self, key, default=None):
+        self.used.add(key)
+        return super().get(key, default)
+
+
 class _Reader:
-    def __init__(self, path, defines):
+    def __init__(self, path, defines, allow_missing=False):
         self.path = path
+        self.allow_missing = allow_missing
+        self.unused = {}  # (tag, type, property) -> [first element, count]
+        self.said = set()
         self.folder = os.path.dirname(os.path.abspath(path))
         self.defaults = dict(defines or {})
         self.defines = dict(defines or {})
@@ -226,7 +263,34 @@ class _Reader:
 
     # --- values ------------------------------------------------------------------------------
     def where(self, el):
-        return f"{self.path}:{getattr(el, 'line', '?')}"
+        return f"{getattr(el, 'path', self.path)}:{getattr(el, 'line', '?')}"
+
+    def file(self, el, value):
+        """The path of a file property: relative to the file that names it, then to the scene's."""
+        here = os.path.join(os.path.dirname(os.path.abspath(getattr(el, "path", self.path))), value)
+        return here if os.path.exists(here) else os.path.join(self.folder, value)
+
+    def missing(self, el, what, file, then):
+        """A file the scene names is absent: an error, or (allow_missing) a warning saying `then`."""
+        msg = f"{self.where(el)}: {what} {os.path.relpath(file, self.folder)!r} not found"
+        if not self.allow_missing:
+            raise SceneError(f"{msg} (--allow-missing renders without it)")
+        self.warn(el, f"{what} {os.path.relpath(file, self.folder)!r} not found; {then}")
+
+    def done(self, el, p, ignore=()):
+        """Note the properties of el that nothing read (one warning per kind, at the end)."""
+        for k, c in dict.items(p):
+            if k not in p.used and k not in ignore:
+                key = (el.tag, self.attr(el, "type"), k)
+                if key in self.unused:
+                    self.unused[key][1] += 1
+                else:
+                    self.unused[key] = [c, 1]
+
+    def warn_unused(self):
+        for (tag, kind, k), (c, n) in self.unused.items():
+            more = f" (and {n - 1} more like it)" if n > 1 else ""
+            self.warn(c, f"property {k!r} of <{tag} type={kind!r}> is not used by the tracer{more}")
 
     def warn(self, el, msg):
         warn(self.warnings, f"{self.where(el)}: {msg}")
@@ -247,8 +311,8 @@ class _Reader:
         return _CAMEL.get(n, n)
 
     def props(self, el):
-        """{name: element} of el's children that carry a name."""
-        return {self.name(c): c for c in el if c.get("name") is not None}
+        """{name: element} of el's children that carry a name (a _Props: see done())."""
+        return _Props({self.name(c): c for c in el if c.get("name") is not None})
 
     def number(self, el):
         try:
@@ -285,26 +349,65 @@ class _Reader:
         """A top-level emitter: `constant` as the scene's environment; the others one line each."""
         kind = self.attr(el, "type")
         p = self.props(el)
+        if kind in ("constant", "envmap") and self.environment is not None:
+            self.warn(el, "a second environment emitter; ignored")
+            return
         if kind == "constant":
             rad = np.asarray(self.rgb(p["radiance"]) if "radiance" in p else (1.0, 1.0, 1.0), float)
-            if self.environment is not None:
-                self.warn(el, "a second environment emitter; ignored")
-                return
             self.environment = Environment(rad)
+        elif kind == "envmap":
+            self.environment = self.envmap(el, p)
         elif kind in ("sunsky", "sky", "sun"):
             self.warn(el, f"emitter {kind!r} is not supported (no sun or sky model); the scene renders without it")
+            return
         else:
-            self.warn(el, f"emitter {kind!r} is not supported yet; the scene renders without it")
+            self.warn(el, f"emitter {kind!r} is not supported (no next-event estimation for it yet); the scene "
+                          f"renders without it")
+            return
+        self.done(el, p)
+
+    def envmap(self, el, p):
+        """An `envmap` emitter as the tracer's Environment: the image (times `scale`) resampled onto
+        the tracer's lat-long grid, bilinearly, through `to_world`'s rotation."""
+        from ..imageio import read_image
+
+        if "filename" not in p:
+            raise SceneError(f"{self.where(el)}: envmap without a filename")
+        file = self.file(el, self.attr(p["filename"], "value"))
+        if not os.path.isfile(file):
+            self.missing(el, "environment map", file, "the scene renders without it")
+            return None
+        img = read_image(file, what="environment map").astype(np.float64)
+        img = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img[:, :, :3]
+        img = img * (self.number(p["scale"]) if "scale" in p else 1.0)
+        if not np.all(np.isfinite(img)) or img.min() < 0.0:
+            raise SceneError(f"{file}: environment map has negative or non-finite pixels")
+        m = self.matrix(p["to_world"]) if "to_world" in p else np.eye(4)
+        return Environment(np.zeros(3), resample_envmap(img, m[:3, :3]), file)
 
     def rgb(self, el):
         if el.tag == "float":
             return (self.number(el),) * 3
-        if el.tag in ("rgb", "spectrum", "color"):
-            vals = [float(x) for x in re.split(r"[,\s]+", self.attr(el, "value").strip()) if x]
+        if el.tag in ("rgb", "spectrum", "color", "srgb"):
+            text = self.attr(el, "value", "").strip()
+            if el.tag == "spectrum" and ":" in text:  # wavelength:value pairs: their mean, grey
+                try:
+                    vals = [float(w.split(":")[1]) for w in re.split(r"[,\s]+", text) if w]
+                except (IndexError, ValueError):
+                    raise SceneError(f"{self.where(el)}: malformed spectrum {text!r}") from None
+                self.warn(el, "a sampled spectrum is read as the grey of its mean value")
+                return (float(np.mean(vals)),) * 3
+            try:
+                vals = [float(x) for x in re.split(r"[,\s]+", text) if x]
+            except ValueError:
+                raise SceneError(f"{self.where(el)}: {self.name(el)!r} needs numbers, got {text!r}") from None
             if len(vals) == 1:
                 vals = vals * 3
             if len(vals) != 3:
                 raise SceneError(f"{self.where(el)}: {self.name(el)!r} needs 1 or 3 numbers")
+            if el.tag == "srgb":  # 0.6's sRGB-encoded colour, decoded
+                v = np.asarray(vals)
+                vals = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4).tolist()
             return tuple(vals)
         raise SceneError(f"{self.where(el)}: {self.name(el)!r} must be a colour here, not <{el.tag}>")
 
@@ -352,11 +455,14 @@ class _Reader:
                 n = np.linalg.norm(axis)
                 if n == 0:
                     raise SceneError(f"{self.where(c)}: rotate needs a non-zero axis")
+                if abs(n - 1.0) > 1e-6:
+                    self.warn_once(c, f"rotate axis {tuple(float(x) for x in axis)} is normalised (Mitsuba 3 uses "
+                                      f"an axis as written, which scales as well as turns)")
                 a = axis / n
                 k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
                 t = np.eye(4)
                 t[:3, :3] = np.eye(3) + np.sin(ang) * k + (1 - np.cos(ang)) * k @ k
-            elif c.tag == "lookat":
+            elif c.tag in ("lookat", "lookAt"):
                 o = np.array([float(x) for x in re.split(r"[,\s]+", self.attr(c, "origin").strip()) if x])
                 tg = np.array([float(x) for x in re.split(r"[,\s]+", self.attr(c, "target").strip()) if x])
                 up = np.array([float(x) for x in re.split(r"[,\s]+", self.attr(c, "up", "0 1 0").strip()) if x])
@@ -379,23 +485,44 @@ class _Reader:
         if "to_uv" in p:
             t = self.matrix(p["to_uv"])
             uv = np.array([[t[0, 0], t[0, 1], t[0, 3]], [t[1, 0], t[1, 1], t[1, 3]], [0, 0, 1]])
+        s_o = [self.number(p[k]) if k in p else d for k, d in (("uscale", 1.0), ("vscale", 1.0), ("uoffset", 0.0),
+                                                                ("voffset", 0.0))]  # 0.6's scale and offset
+        uv = np.array([[s_o[0], 0, s_o[2]], [0, s_o[1], s_o[3]], [0, 0, 1]]) @ uv
         # Mitsuba reads the texture at (u, 1 - v) of our UVs
         flip = np.array([[1.0, 0, 0], [0, -1.0, 1.0], [0, 0, 1]])
         m = uv @ flip
         if kind == "bitmap":
             m = flip @ m  # our bitmap lookup flips v back (rows from the top at v' = 1)
-            file = self.attr(p["filename"], "value") if "filename" in p else ""
+            if "filename" not in p:
+                raise SceneError(f"{self.where(el)}: bitmap without a filename")
+            file = self.file(el, self.attr(p["filename"], "value"))
+            if not os.path.isfile(file):
+                self.missing(el, "texture", file, "its constant 0.5 is used")
             gamma = self.number(p["gamma"]) if "gamma" in p else 0.0  # 0.6: 1 linear, -1 sRGB
             if "raw" in p and self.attr(p["raw"], "value") == "true":  # Mitsuba 3: no sRGB decoding
                 gamma = 1.0
-            return TextureSpec("bitmap", os.path.join(self.folder, file), uv=tuple(m[:2].reshape(-1)),
+            filt = self.attr(p["filter_type"], "value") if "filter_type" in p else "bilinear"
+            if filt != "bilinear":
+                self.warn_once(p["filter_type"], f"bitmap filter_type {filt!r} is read as bilinear (no mip maps)")
+            wrap = self.attr(p["wrap_mode"], "value") if "wrap_mode" in p else "repeat"
+            if wrap != "repeat":
+                self.warn_once(p["wrap_mode"], f"bitmap wrap_mode {wrap!r} is read as repeat")
+            self.done(el, p)
+            return TextureSpec("bitmap", file, uv=tuple(m[:2].reshape(-1)),
                                fallback=(0.5, 0.5, 0.5), where=self.where(el), gamma=gamma)
         if kind == "checkerboard":
             c0 = self.rgb(p["color0"]) if "color0" in p else (0.4, 0.4, 0.4)
             c1 = self.rgb(p["color1"]) if "color1" in p else (0.2, 0.2, 0.2)
+            self.done(el, p)
             return TextureSpec("checker", color0=c0, color1=c1, uv=tuple(m[:2].reshape(-1)), where=self.where(el))
         self.warn(el, f"texture type {kind!r} is not supported; its constant 0.5 is used")
         return None
+
+    def warn_once(self, el, msg):
+        """A warning shown once per message (the first place it applies)."""
+        if msg not in self.said:
+            self.said.add(msg)
+            self.warn(el, msg)
 
     def add_texture(self, spec):
         if spec is None:
@@ -434,12 +561,22 @@ class _Reader:
                     raise SceneError(f"{self.where(hs[0])}: bumpmap's height must be a texture")
                 tex[TEX_SLOT_BUMP] = self.add_texture(t)
                 param[P_BUMP_SCALE] = self.number(p["scale"]) if "scale" in p else 1.0
+                inner = inner + hs
+            self.done(el, p, ignore={self.name(c) for c in inner})
             return mtype, param, list(tex)
-        alpha = self.number(p["alpha"]) if "alpha" in p else 0.1
-        dist = self.attr(p["distribution"], "value") if "distribution" in p else "beckmann"
+        mtype, param, tex = self.leaf_bsdf(el, kind, p, param, tex, flags)
+        self.done(el, p, ignore={"sample_visible", "sampleVisible"})
+        return mtype, param, tex
+
+    def leaf_bsdf(self, el, kind, p, param, tex, flags):
+        """(type, param, tex) of a BSDF that wraps no other."""
+        alpha = self.number(p["alpha"]) if kind.startswith("rough") and "alpha" in p else 0.1
+        dist = self.attr(p["distribution"], "value") if kind.startswith("rough") and "distribution" in p \
+            else "beckmann"
         coat = kind in ("plastic", "roughplastic")
-        ior_in = self.ior(p, "int_ior", "polypropylene" if coat else "bk7")
-        ior_out = self.ior(p, "ext_ior", "air")
+        glass = kind in ("dielectric", "roughdielectric", "thindielectric")
+        ior_in = self.ior(p, "int_ior", "polypropylene" if coat else "bk7") if coat or glass else 1.0
+        ior_out = self.ior(p, "ext_ior", "air") if coat or glass else 1.0
         if kind in ("diffuse", "roughdiffuse"):
             if kind == "roughdiffuse":
                 self.warn(el, "roughdiffuse is rendered as diffuse (as Mitsuba 3 does)")
@@ -492,6 +629,7 @@ class _Reader:
             param[14] = flags
             return bsdfs.COATED, param, tex
         self.warn(el, f"bsdf type {kind!r} is not supported; rendered as diffuse 0.5")
+        p.used.update(p)
         param[0:3] = 0.5
         return bsdfs.DIFFUSE, param, tex
 
@@ -501,17 +639,29 @@ class _Reader:
         p = self.props(el)
         smooth = False
         m = self.matrix(p["to_world"]) if "to_world" in p else np.eye(4)
-        if kind == "obj":
-            file = os.path.join(self.folder, self.attr(p["filename"], "value"))
+        if kind in ("obj", "ply", "serialized"):
+            if "filename" not in p:
+                raise SceneError(f"{self.where(el)}: shape {kind!r} without a filename")
+            file = self.file(el, self.attr(p["filename"], "value"))
             if not os.path.isfile(file):
-                self.warn(el, f"shape file {os.path.relpath(file, self.folder)!r} not found; the shape is left out")
+                self.missing(el, "shape file", file, "the shape is left out")
+                p.used.update(p)
                 return
-            mesh = read_geometry(file, self.warnings)
+            if kind == "obj":
+                mesh = read_geometry(file, self.warnings)
+            elif kind == "ply":
+                mesh = read_ply(file)
+                if "flip_tex_coords" in p and self.attr(p["flip_tex_coords"], "value") == "true" \
+                        and mesh.uv is not None:
+                    mesh.uv[..., 1] = 1.0 - mesh.uv[..., 1]
+            else:
+                mesh = read_serialized(file, int(self.number(p["shape_index"])) if "shape_index" in p else 0)
             tri, uv, nrm = mesh.tri, mesh.uv, mesh.normals
-            face = "face_normals" in p and self.attr(p["face_normals"], "value") == "true"
+            face = self.attr(p["face_normals"], "value") == "true" if "face_normals" in p \
+                else getattr(mesh, "face_normals", False)
             if face:
                 nrm = None
-            elif nrm is None:  # Mitsuba computes smooth normals for an OBJ without vn, in world space
+            elif nrm is None:  # Mitsuba computes smooth normals for a mesh without them, in world space
                 smooth = True
         elif kind == "rectangle":
             tri = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]], float)
@@ -533,7 +683,8 @@ class _Reader:
             tri, uv, nrm = _cylinder(DISK_SEGMENTS)
             m = m @ _frame_to(p0, p1, r)
         else:
-            self.warn(el, f"shape type {kind!r} is not supported yet; the shape is left out")
+            self.warn(el, f"shape type {kind!r} is not supported; the shape is left out")
+            p.used.update(p)
             return
         flip = "flip_normals" in p and self.attr(p["flip_normals"], "value") == "true"
         tri = tri @ m[:3, :3].T + m[:3, 3]  # (the winding, and so the normal, of the world-space corners)
@@ -563,6 +714,7 @@ class _Reader:
                 continue
             ep = self.props(e)
             emission = np.asarray(self.rgb(ep["radiance"]) if "radiance" in ep else (1.0, 1.0, 1.0))
+            self.done(e, ep)
             name = f"{name}+emitter@{e.line}"
         if name not in self.by_name:
             if bel is not None:
@@ -578,12 +730,39 @@ class _Reader:
         self.mats.append(np.full(n, self.by_name[name], np.int32))
         self.uvs.append(uv if uv is not None else np.zeros((n, 3, 2)))
         self.normals.append(nrm if nrm is not None else np.zeros((n, 3, 3)))
+        self.done(el, p)
+
+    def include(self, node, chain):
+        """Replace node's <include> children by the children of the files they name (recursively;
+        a file that includes itself, directly or not, is an error naming the cycle)."""
+        out = []
+        for c in node.children:
+            if c.tag != "include":
+                self.include(c, chain)
+                out.append(c)
+                continue
+            name = self.attr(c, "filename")
+            if not name:
+                raise SceneError(f"{self.where(c)}: include without a filename")
+            file = os.path.abspath(self.file(c, name))
+            if file in chain:
+                cycle = " -> ".join(os.path.basename(f) for f in chain[chain.index(file):] + [file])
+                raise SceneError(f"{self.where(c)}: include cycle ({cycle})")
+            if not os.path.isfile(file):
+                raise SceneError(f"{self.where(c)}: included file {name!r} not found")
+            root = _parse(file)
+            if root.tag != "scene":
+                raise SceneError(f"{file}: the root element is <{root.tag}>, not <scene>")
+            self.include(root, chain + [file])
+            out.extend(root.children)
+        node.children = out
 
     # --- the scene ------------------------------------------------------------------------------
     def read(self):
         root = _parse(self.path)
         if root.tag != "scene":
             raise SceneError(f"{self.path}: the root element is <{root.tag}>, not <scene>")
+        self.include(root, [os.path.abspath(self.path)])
         for el in root:
             if el.tag == "default":
                 self.defaults.setdefault(el.get("name"), el.get("value"))
@@ -597,8 +776,17 @@ class _Reader:
                 continue
             if tag == "integrator":
                 p = self.props(el)
+                kind = self.attr(el, "type")
+                if kind not in ("path", "volpath", "direct"):
+                    self.warn(el, f"integrator {kind!r}: the tracer renders with its own path tracer "
+                                  f"(or the method chosen); its max_depth is kept")
                 if "max_depth" in p:
                     render.max_depth = int(self.number(p["max_depth"]))
+                if kind == "direct":
+                    render.max_depth = 2
+                if "rr_depth" in p:
+                    render.rr_depth = int(self.number(p["rr_depth"]))
+                self.done(el, p)
             elif tag == "sensor":
                 spec_cam, width, height, spp = self.sensor(el, spec_cam)
                 if spp:
@@ -609,6 +797,7 @@ class _Reader:
                 self.emitter(el)
             else:
                 self.warn(el, f"<{tag}> is not supported yet; ignored")
+        self.warn_unused()
         if not self.tris:
             raise SceneError(f"{self.path}: no shape the tracer can read")
         has_uv = any(np.any(u) for u in self.uvs)
@@ -634,6 +823,15 @@ class _Reader:
         cam.fov_axis = axis
         if "to_world" in p:
             cam.matrix = self.matrix(p["to_world"])
+        if "near_clip" in p:
+            cam.near = self.number(p["near_clip"])
+            if cam.near < 0.0:
+                raise SceneError(f"{self.where(p['near_clip'])}: near_clip must be >= 0")
+        far = p.get("far_clip")  # (Mitsuba's default 1e4; a nearer one is not applied)
+        if far is not None and self.number(far) < 1e4:
+            self.warn(far, "far_clip is not applied (the tracer's rays are unbounded)")
+        if self.attr(el, "type") == "thinlens":
+            p.used.update({"aperture_radius", "focus_distance", "apertureRadius", "focusDistance"})
         width, height, spp = 768, 576, 0
         for c in el:
             if c.tag == "film":
@@ -643,9 +841,12 @@ class _Reader:
                 for f in c:
                     if f.tag == "rfilter" and self.attr(f, "type") != "box":
                         self.warn(f, f"rfilter {self.attr(f, 'type')!r} is rendered with the box filter")
+                self.done(c, fp, ignore=FILM_OUTPUT)
             elif c.tag == "sampler":
                 sp = self.props(c)
                 spp = int(self.number(sp["sample_count"])) if "sample_count" in sp else 0
+                self.done(c, sp, ignore={"seed"})
+        self.done(el, p)
         if cam.fov_axis in ("diagonal", "smaller", "larger"):  # as the horizontal fov Mitsuba means
             t = math.tan(math.radians(cam.fov) / 2.0)
             if cam.fov_axis == "diagonal":
@@ -656,8 +857,33 @@ class _Reader:
         return cam, width, height, spp
 
 
-def read_mitsuba_scene(path, defines=None):
+def read_mitsuba_scene(path, defines=None, allow_missing=False):
     """The SceneSpec of a Mitsuba scene XML (see the module docstring); `defines` override its
-    <default> values as `mitsuba -D name=value` does."""
-    return _Reader(path, defines).read()
+    <default> values as `mitsuba -D name=value` does; allow_missing turns a missing mesh, texture
+    or environment map into a warning (the shape left out, the texture a constant)."""
+    return _Reader(path, defines, allow_missing).read()
+
+
+def resample_envmap(img, rot):
+    """An equirectangular image in Mitsuba's envmap convention, turned by rot (3x3, to_world),
+    resampled bilinearly onto the tracer's grid (tracer.lights.env_uv), same size.
+
+    Mitsuba's local direction of (u, v) is (sin phi sin theta, cos theta, -cos phi sin theta) with
+    phi = 2 pi u, theta = pi v, column x centred at u = (x + 1/2) / W, row y at v = y / (H - 1);
+    the tracer's u is half a turn further (phi = 2 pi (u - 1/2)), its rows centred."""
+    h, w = img.shape[:2]
+    v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    theta, phi = np.pi * v, 2.0 * np.pi * (u - 0.5)
+    d = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), -np.sin(theta) * np.cos(phi)], axis=-1)
+    r = rot / np.linalg.norm(rot, axis=0)  # its rotation (columns normalised)
+    loc = d @ np.linalg.inv(r).T
+    mu = (np.arctan2(loc[..., 0], -loc[..., 2]) / (2.0 * np.pi)) % 1.0
+    mv = np.arccos(np.clip(loc[..., 1], -1.0, 1.0)) / np.pi
+    x, y = mu * w - 0.5, mv * (h - 1.0)  # Mitsuba: columns texel-centred, rows from pole to pole
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+    x0, x1 = x0 % w, (x0 + 1) % w
+    y1 = np.minimum(y0 + 1, h - 1)
+    return ((img[y0, x0] * (1 - fx) + img[y0, x1] * fx) * (1 - fy)
+            + (img[y1, x0] * (1 - fx) + img[y1, x1] * fx) * fy)
 
