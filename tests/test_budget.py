@@ -14,7 +14,7 @@ from tests.test_cli import CORNELL
 
 BUDGET = 5.0
 METHODS = {"bsdf": {}, "grid": {"guide": "grid"}, "photon": {"guide": "photon"}, "pss": {"guide": "pss"},
-           "odis": {"guide": "odis"}, "gpt-l2": {"integrator": "gpt", "recon": "l2"},
+           "odis": {"guide": "odis"}, "ppg": {"guide": "ppg"}, "gpt-l2": {"integrator": "gpt", "recon": "l2"},
            "gpt-l1": {"integrator": "gpt", "recon": "l1"}, "gpt-gradnet": {"integrator": "gpt", "recon": "gradnet"}}
 
 

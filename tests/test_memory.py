@@ -50,7 +50,7 @@ def test_check_arithmetic():
 
 
 METHODS = [("bsdf", {}), ("grid", {}), ("photon", {}), ("pss", {"guide_settings": {"train_seconds": 1.0}}),
-           ("odis", {}), ("gpt-l1", {}), ("gpt-l2", {})]
+           ("odis", {}), ("ppg", {}), ("gpt-l1", {}), ("gpt-l2", {})]
 
 
 @pytest.mark.parametrize("method,kw", METHODS, ids=[m for m, _ in METHODS])

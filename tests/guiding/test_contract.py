@@ -16,7 +16,7 @@ import pytest
 
 from tracer.testing.chi2 import ChiSquareTest
 from tracer.testing.stats import z_critical
-from tracer.guiding import REGISTRY, make_guide
+from tracer.guiding import REGISTRY, guide_settings, make_guide
 from tracer.guiding.directional import bin_of_batch
 from tracer.guiding.contract import guide_pdf_batch, guide_sample_batch
 from tests.test_cli import CORNELL
@@ -41,7 +41,8 @@ def table_state(name, sampling_map):
     h, w = sampling_map.shape
     g = make_guide(name)
     if hasattr(g, "fixed_state"):
-        return make_guide(name, map_width=w, map_height=h).fixed_state(sampling_map), -1, 1
+        size = {k: v for k, v in (("map_width", w), ("map_height", h)) if k in guide_settings(name)}
+        return make_guide(name, **size).fixed_state(sampling_map), -1, 1
     if hasattr(g, "pixel_state"):
         return g.pixel_state(sampling_map), 0, 0
     raise AssertionError(f"guide {name!r} has neither fixed_state nor pixel_state: the contract cannot test it")

@@ -1,7 +1,8 @@
 """Directional samplers for the bounce direction, registered by name.
 
 `bsdf` is plain BSDF importance sampling (no guide). `grid` and `photon` are histogram guides on
-a hierarchical grid (tracer/guiding/grid/guides.py), learned from camera paths and from photons.
+a hierarchical grid (tracer/guiding/grid/guides.py), learned from camera paths and from photons;
+`ppg` is Practical Path Guiding's SD-tree (tracer/guiding/ppg.py).
 Each guide is built from a settings dict; unknown names or settings are errors that list the
 valid ones. A guide is a `base.Guide`: `prepare(scene, ctx)`, `state()` (the arrays the
 integrator's kernels read, a `contract.GuideState`), `observe(records)` (the vertices of a wave of
@@ -14,6 +15,7 @@ from ..errors import SettingsError, unknown_name
 from .base import Guide
 from .grid.guides import GridGuide, PhotonGuide
 from .odis.guide import OdisGuide
+from .ppg import PPGGuide
 from .pss.warp import PSSGuide
 
 # name -> (factory or None for plain BSDF sampling, {setting: default})
@@ -23,6 +25,7 @@ REGISTRY = {
     "photon": (PhotonGuide, PhotonGuide.DEFAULTS),
     "pss": (PSSGuide, PSSGuide.DEFAULTS),
     "odis": (OdisGuide, OdisGuide.DEFAULTS),
+    "ppg": (PPGGuide, PPGGuide.DEFAULTS),
 }
 
 

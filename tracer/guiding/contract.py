@@ -10,9 +10,10 @@ The integrator samples the one-sample MIS mixture a p_bsdf + (1 - a) p_guide (tr
 and never reads anything else of a guide. Space and direction are apart: `locate` finds a map
 by position (the voxels of a guide's spatial structure, find_voxel) or by film pixel (a first
 bounce's per-pixel map), and a map is a row of the directional tables (guiding.directional:
-a theta-phi histogram with its sampling tables; the family every guide uses today). A guide
-whose maps are another family (a mixture of lobes, a quadtree) adds its arrays to GuideState
-and its branch to slot_sample and slot_pdf, and nothing else in the kernels changes. A guide
+a theta-phi histogram with its sampling tables, family TABLES), or a directional quadtree
+(guiding.quadtree, family QUADTREE: Practical Path Guiding's). Another family (e.g. a mixture of
+lobes) adds its arrays to GuideState and its branch to slot_sample and slot_pdf, and nothing
+else in the kernels changes. A guide
 builds the state in `Guide.state()`; `empty_state()` is no guide at all. guide_sample,
 guide_pdf and their batches are the contract tests' view (tests/guiding/test_contract.py).
 """
@@ -23,6 +24,13 @@ from numba import prange
 
 from .._jit import jit, kernel
 from .directional import map_pdf, map_sample
+from .quadtree import qt_pdf, qt_sample
+
+TABLES, QUADTREE = 0, 1  # GuideState.family: what a slot indexes
+# the quadtree arrays of a state without quadtrees (read-only; the same dtypes and layout as real ones)
+_NO_QT_CHILD = np.full((1, 4), -1, np.int32)
+_NO_QT_VALUE = np.zeros((1, 4))
+_NO_QT_ROOT = np.zeros(1, np.int32)
 
 
 class GuideState(NamedTuple):
@@ -45,6 +53,10 @@ class GuideState(NamedTuple):
     n_class: int  # trees per cell: 1, or 6 (one per facing-normal class, see normal_class)
     pixel_slot: np.ndarray  # (P,) int32 per film pixel, the map its first bounce samples (-1: the voxel's); (0,): none
     pixel_alpha: np.ndarray  # (P,) float64 per film pixel, the mixing weight that goes with it
+    family: int = TABLES  # TABLES: a slot is a row of rowcum/dens; QUADTREE: the tree at qt_root[slot]
+    qt_child: np.ndarray = _NO_QT_CHILD  # (Q, 4) int32 quadtree nodes' children (-1: leaf quadrant)
+    qt_value: np.ndarray = _NO_QT_VALUE  # (Q, 4) float64 their quadrants' energy
+    qt_root: np.ndarray = _NO_QT_ROOT  # (S,) int32 the root node of each slot's tree
 
 
 def empty_state(n_theta=2, n_phi=2):
@@ -118,12 +130,16 @@ def locate(gs, x, n, pixel, depth):
 @jit(inline="always")
 def slot_sample(gs, slot, u0, u1):
     """(world direction, solid-angle pdf) from sampling map `slot` (>= 0) for u0, u1 in [0, 1)."""
+    if gs.family == QUADTREE:
+        return qt_sample(gs.qt_child, gs.qt_value, gs.qt_root[slot], u0, u1)
     return map_sample(gs.rowcum, gs.dens, gs.wsum, gs.pscale, slot, gs.n_theta, gs.n_phi, u0, u1)
 
 
 @jit(inline="always")
 def slot_pdf(gs, slot, d):
     """Solid-angle density of world direction d under sampling map `slot` (>= 0)."""
+    if gs.family == QUADTREE:
+        return qt_pdf(gs.qt_child, gs.qt_value, gs.qt_root[slot], d)
     return map_pdf(gs.dens, gs.pscale, slot, gs.n_theta, gs.n_phi, d)
 
 

@@ -1,0 +1,157 @@
+"""`ppg`: Practical Path Guiding (Müller, Gross and Novák 2017), the baseline guiding papers compare
+against: an SD-tree (tracer.guiding.sdtree) learned from camera paths over iterations of doubling
+spp (the schedule of tracer.guiding.grid.schedule), sampled one-sample-MIS with the BSDF.
+
+Each camera vertex splats its incident radiance estimate L_i / pdf (luminance) into the D-tree of
+its spatial leaf, at its sampled direction (nearest filters). After each iteration the trees are
+built and become the sampling trees, spatial leaves holding more than c sqrt(spp / 4) records split
+(spp: the iteration's samples per pixel; PPG's threshold with its 4 spp per pass), and the next
+building trees are refined where a quadrant holds more than `rho` of its tree's energy. The BSDF
+is sampled with probability `alpha` wherever a tree has energy, alone where it has none: 0.8 by
+default, as the paper's 0.5 makes fireflies here (a BSDF-sampled direction where the tree has no
+energy weighs 1 / alpha, and these multiply along a path; on `ajar` at 128 spp, 0.5 gives 4.5x
+bsdf's relMSE, 56% of it in 20 pixels; 0.8 gives 1.0x; docs/ppg.md). With `direct` 0 (NEE on, the default) the records leave out the emission their
+direction hits (NEE samples it), PPG's "always" mode; with NEE off they carry it all. docs/ppg.md.
+"""
+import math
+import time
+
+import numpy as np
+
+from ..errors import SettingsError
+from ..film import Film
+from .base import Guide, _float, _int
+from .contract import QUADTREE, empty_state
+from .sdtree import SDTree
+
+
+class PPGGuide(Guide):
+    """Practical Path Guiding (Müller et al. 2017): an SD-tree of directional quadtrees learned from
+    camera paths over iterations of doubling spp, mixed with the BSDF (probability alpha)."""
+
+    name = "ppg"
+    learns = True
+    DEFAULTS = {"iterations": 12, "spp_init": 1, "train_budget": 0.5, "split_c": 12000.0, "rho": 0.01,
+                "max_depth": 20, "alpha": 0.8, "direct": 0}
+    fixed_bytes = 64 << 20
+
+    @property
+    def pixel_bytes(self):
+        """The training iterations' films and the vertex records (as the histogram guides)."""
+        return int(1.25 * ((1 + self.iterations) * Film.bytes_per_pixel() + 320))
+
+    def __init__(self, **settings):
+        s = dict(self.DEFAULTS, **settings)
+        self.iterations = _int("iterations", s["iterations"], 0)
+        self.spp_init = _int("spp_init", s["spp_init"], 1)
+        self.train_budget = _float("train_budget", s["train_budget"], 0.0, 1.0)
+        self.c = _float("split_c", s["split_c"], 1.0)
+        self.rho = _float("rho", s["rho"], 0.0, 1.0)
+        self.max_depth = _int("max_depth", s["max_depth"], 1)
+        if self.max_depth > 20:
+            raise SettingsError(f"guide setting max_depth must be at most 20, got {self.max_depth}")
+        self.alpha = _float("alpha", s["alpha"], 0.0, 1.0)
+        if s["direct"] not in (0, 1) or isinstance(s["direct"], bool):
+            raise SettingsError(f"guide setting direct must be 0 or 1, got {s['direct']!r}")
+        self.learn_direct = bool(s["direct"])
+        self.settings = s
+        self.grid = None
+
+    def prepare(self, scene, ctx):
+        self.bounds = np.asarray(scene.bounds, np.float64)
+        self.grid = None  # the SD-tree, once a record arrived
+        self.iteration = 0
+        self._spp = 1  # samples per pixel of the pass being recorded (the pilot's)
+        self._state = empty_state()
+        self.time_learning = self.time_update = 0.0
+        self.peak_memory = 0
+        self.info = {"vertices": 0}
+
+    def warm_up(self, ctx):
+        t = SDTree(np.zeros(3), np.ones(3), self.rho, self.max_depth)
+        t.record(np.full((1, 3), 0.5), np.array([[0.0, 0.0, 1.0]]), np.ones(1))
+        t.step(0.5)
+        self._export(t)
+
+    def state(self):
+        return self._state
+
+    def observe(self, rec):
+        t0 = time.perf_counter()
+        keep = (rec.strategy >= 0) & (rec.pdf > 0)
+        if keep.any():
+            if self.grid is None:
+                lo, hi = self.bounds
+                pad = 1e-4 * max(float(np.linalg.norm(hi - lo)), 1e-6)
+                self.grid = SDTree(lo - pad, hi + pad, self.rho, self.max_depth)
+            energy = rec.radiance[keep].astype(np.float64) / rec.pdf[keep].astype(np.float64)
+            self.grid.record(rec.x[keep].astype(np.float64), rec.wi[keep].astype(np.float64), energy)
+            self.info["vertices"] += int(keep.sum())
+        self.time_learning += time.perf_counter() - t0
+
+    def update(self):
+        t0 = time.perf_counter()
+        if self.grid is not None:
+            self.grid.step(self.c * math.sqrt(self._spp / 4.0))
+            self._state = self._export(self.grid)
+            self.peak_memory = max(self.peak_memory, self.memory_bytes())
+        self.iteration += 1
+        self._spp = self.spp_init * 2 ** self.iteration  # the next training iteration's spp
+        self.time_update += time.perf_counter() - t0
+
+    def _export(self, tree):
+        child, axis, split, slot, qc, qv, roots = tree.export()
+        s = 1.0 / tree.side
+        return empty_state()._replace(
+            lo=tree.lo.copy(), inv_cell=np.full(3, s), res=np.ones(3, np.int64), child=child, axis=axis, split=split,
+            slot=slot, alpha=np.full(child.size, self.alpha), family=QUADTREE, qt_child=np.ascontiguousarray(qc),
+            qt_value=np.ascontiguousarray(qv), qt_root=np.ascontiguousarray(roots))
+
+    def fixed_state(self, sampling_map):
+        """A state whose whole space (the cube [-1, 1]^3) is one leaf whose tree holds the map
+        (n_theta, n_phi), both powers of two, rows in z and columns in phi as guiding.directional's,
+        for the sampler contract tests."""
+        m = np.asarray(sampling_map, dtype=np.float64)
+        h, w = m.shape
+        if h & (h - 1) or w & (w - 1):
+            raise SettingsError(f"ppg's fixed map needs power-of-two sides, got {m.shape}")
+        r = max(h, w)
+        leaves = np.repeat(np.repeat(m, r // h, axis=0), r // w, axis=1) / (r * r)  # (u index, v index)
+        child, value = [], []
+
+        def node(a, b, size):  # the square [a, a + size) x [b, b + size) in leaf units
+            k = len(child)
+            child.append([-1] * 4)
+            value.append([0.0] * 4)
+            h2 = size // 2
+            for i, (da, db) in enumerate(((0, 0), (h2, 0), (0, h2), (h2, h2))):
+                if h2 == 1:
+                    value[k][i] = float(leaves[a + da, b + db])
+                else:
+                    c = node(a + da, b + db, h2)
+                    child[k][i] = c
+                    value[k][i] = float(np.sum(value[c]))
+            return k
+
+        node(0, 0, r)
+        tree = SDTree(-np.ones(3), np.ones(3), self.rho, self.max_depth)
+        tree.sampling[0] = (np.array(child, np.int32), np.array(value))
+        return self._export(tree)
+
+    def memory_bytes(self):
+        t = self.grid
+        if t is None:
+            return 0
+        trees = {id(c): c.nbytes + v.nbytes for c, v in t.sampling + t.building}
+        return int(sum(trees.values()) + t.child.nbytes * 6)
+
+    def stats(self):
+        out = dict(self.info)
+        out.update({"name": self.name, "iterations_done": self.iteration, "settings": dict(self.settings)})
+        t = self.grid
+        if t is not None:
+            slot = t.export()[3]
+            leaves = t.leaves
+            out.update({"voxels": int(leaves.size), "voxels_with_map": int((slot[leaves] >= 0).sum()),
+                        "dtree_nodes": int(sum(t.sampling[i][0].shape[0] for i in leaves))})
+        return out
