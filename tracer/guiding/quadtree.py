@@ -16,6 +16,9 @@ u-half, then the v-half within it, each with one of the two uniforms, rescaled),
 direction uniformly in the leaf's square with what is left of them. The density of direction d is
 the product over the levels of 4 value[i] / sum(value), over 4 pi: piecewise constant per leaf.
 
+qt_sample and qt_pdf are not inlined into the kernels that call them: inlined into every shading
+kernel, their loops added about 100 s to the test suite's compiles.
+
 Learning (PPG section 3.3): records splat their energy into the leaf holding their direction, each
 into the tree of its spatial leaf (`splat`); `refine` then builds the next tree from the filled one, splitting every quadrant that
 holds more than `rho` of the tree's energy, down to `max_depth` levels (a quadrant that was a leaf
@@ -49,7 +52,7 @@ def uv_to_dir(u, v):
     return (s * math.cos(phi), s * math.sin(phi), z)
 
 
-@jit(inline="always")
+@jit
 def qt_pdf(child, value, root, d):
     """Density per unit solid angle of the tree at `root` in direction d (0 where it has no energy)."""
     u, v = dir_to_uv(d)
@@ -74,7 +77,7 @@ def qt_pdf(child, value, root, d):
     return p / FOUR_PI
 
 
-@jit(inline="always")
+@jit
 def qt_sample(child, value, root, u0, u1):
     """(direction, density) drawn from the tree at `root` with the uniforms u0, u1; the density is
     qt_pdf's of the returned direction. ((0, 0, 1), 0) for a tree without energy."""
