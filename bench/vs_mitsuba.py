@@ -26,6 +26,7 @@ import numpy as np
 import tracer
 from bench.atomic import write_text
 from tracer.metals import METALS
+from tracer.textures import srgb_decode
 
 EPS = 0.01  # relMSE's epsilon (tracer.metrics.relmse)
 
@@ -123,8 +124,7 @@ def mitsuba_copy(path, folder, allow_missing=False, size=None):
         if el.tag == "srgb":
             v = np.array([float(x) for x in el.get("value").replace(",", " ").split()])
             el.tag = "rgb"
-            el.set("value", ", ".join(f"{x:.9g}" for x in np.where(v <= 0.04045, v / 12.92,
-                                                                       ((v + 0.055) / 1.055) ** 2.4)))
+            el.set("value", ", ".join(f"{x:.9g}" for x in srgb_decode(v, np.float64)))
     out = os.path.join(folder, os.path.basename(path))
     tree.write(out)
     return out, notes

@@ -63,10 +63,10 @@ class Textures:
         return row[10:13].copy()
 
 
-def srgb_decode(x):
-    """sRGB-encoded [0, 1] -> linear (IEC 61966-2-1)."""
-    x = np.asarray(x, dtype=np.float32)
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
+def srgb_decode(x, dtype=np.float32):
+    """sRGB-encoded [0, 1] -> linear (IEC 61966-2-1), as `dtype`."""
+    x = np.asarray(x, dtype=dtype)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(dtype)
 
 
 def read_texture(path, gamma=0.0):

@@ -37,7 +37,7 @@ from ..material import (
 )
 from ..metals import METALS
 from ..scene import CameraSpec, Environment, RenderSettings, SceneSpec
-from ..textures import TextureSpec
+from ..textures import TextureSpec, srgb_decode
 from .meshes import read_ply, read_serialized
 from .obj import read_geometry
 from .text import warn
@@ -406,8 +406,7 @@ class _Reader:
             if len(vals) != 3:
                 raise SceneError(f"{self.where(el)}: {self.name(el)!r} needs 1 or 3 numbers")
             if el.tag == "srgb":  # 0.6's sRGB-encoded colour, decoded
-                v = np.asarray(vals)
-                vals = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4).tolist()
+                vals = srgb_decode(vals, np.float64).tolist()
             return tuple(vals)
         raise SceneError(f"{self.where(el)}: {self.name(el)!r} must be a colour here, not <{el.tag}>")
 
