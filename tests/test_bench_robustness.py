@@ -66,3 +66,23 @@ def test_non_finite_samples_are_caught(box, monkeypatch, capsys):
     cols = lines[head + 1].split()
     assert cols[1] == "bsdf" and cols[3] == "0" and cols[4] == "3"  # NaN/inf pixels, NaN/inf samples
     assert lines[head + 1].endswith("<- NaN/inf samples")
+
+
+def test_a_method_that_loses_at_equal_time_fails_the_run(box, monkeypatch, capsys):
+    """--time adds each method's mean relMSE at equal time; a method whose ratio to bsdf's is above
+    --max-ratio fails the run and is named in the worst-ratio table (here the equal-time renders
+    are stood in for: grid made 1.5x and photon 0.5x bsdf's error)."""
+    obj, _ = box
+    factor = {"bsdf": 1.0, "grid": 1.5, "photon": 0.5}
+
+    def timed(scene_name, method, budget, seeds, scene_dir=None):
+        assert budget == 2.0 and seeds == [7, 8]
+        return {"relMSE_time": 0.01 * factor[method], "spp_time": 10.0, "nonfinite_time": 0}
+
+    monkeypatch.setattr(robustness, "equal_time", timed)
+    args = ["--scenes", obj, "--spp", "4", "--crop", "32", "--time", "2", "--seeds", "2"]
+    assert robustness.main(args + ["--methods", "bsdf,photon"]) == 0
+    assert "photon       0.50" in capsys.readouterr().out
+    assert robustness.main(args + ["--methods", "bsdf,grid,photon"]) == 1
+    out = capsys.readouterr().out
+    assert "grid         1.50" in out and "<- loses to bsdf" in out

@@ -156,7 +156,7 @@ class Session:
             raise ValueError("run_pass renders into a film opened with new_film (or the final film)")
         tp = _time.perf_counter()
         observe = g.observe if learn else None
-        direct = g.learn_direct if g is not None else True
+        direct = g.records_direct(ctx) if g is not None else True
         self._pass_paths, self._pass_seconds = 0, 0.0
         limit = (lambda n: self.wave_limit(n, film, sweeps)) if deadline and self.time is not None else None
         if wave is None:

@@ -27,11 +27,15 @@ GUIDES = [g for g in guide_names() if hasattr(REGISTRY[g][0], "fixed_state")]  #
 # every guide at its defaults (mixing weights of least second moment), and the paper's eq. 14
 # weights (which change how often each strategy is drawn, so they must leave the mean alone too)
 # and paths split where they become overweight (split 1.5: often, so that the test sees it), and a
-# narrow weight window (which splits and roulettes often), and maps reconstructed by the network
-VARIANTS = [(g, {}) for g in GUIDES] + [("photon", {"mixing": "eq14"}), ("photon", {"light_guiding": 0.5}),
-                                        ("photon", {"split": 1.5, "window": 0.0}),
-                                        ("photon", {"window": 1.0, "window_low": 0.5}),
-                                        ("photon", {"reconstruct": "cnn"})]
+# narrow weight window (which splits and roulettes often), and maps reconstructed by the network;
+# switch_off 0 so that the final passes are guided whatever the small scenes predict, and one
+# variant where the guide always switches itself off after training (guiding.mixing)
+VARIANTS = [(g, {"switch_off": 0}) for g in GUIDES] + [("photon", {"mixing": "eq14"}),
+                                                       ("photon", {"light_guiding": 0.5, "switch_off": 0}),
+                                                       ("photon", {"split": 1.5, "window": 0.0, "switch_off": 0}),
+                                                       ("photon", {"window": 1.0, "window_low": 0.5, "switch_off": 0}),
+                                                       ("photon", {"reconstruct": "cnn", "switch_off": 0}),
+                                                       ("photon", {"switch_off": 1e-9})]
 CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96), ("ajar-textured", 48, 36, 96)]
 N_TESTS = len(CASES) * len(VARIANTS) * 3
 
@@ -65,6 +69,9 @@ def test_guided_mean_equals_bsdf_mean(case, variant, bsdf_renders):
         assert r.stats["split_copies"] > 0, "no path was split: this test would not test splitting"
     if opts.get("window"):
         assert r.stats["window_ended"] > 0, "the window ended no path: this test would not test its roulette"
+    assert st["switched_off"] == (opts.get("switch_off") == 1e-9), st.get("predicted_ratios")
+    if st["switched_off"]:  # final passes of BSDF sampling alone: no splitting, no window
+        assert r.stats["split_copies"] == 0 and r.stats["window_ended"] == 0
     m_g, v_g = image_mean(r)
     m_b, v_b = image_mean(bsdf_renders[name])
     assert_z(m_g, v_g + v_b, m_b, n_tests=N_TESTS, what=f"{guide} on {name} vs bsdf")

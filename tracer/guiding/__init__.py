@@ -81,11 +81,11 @@ def warm_up_guides(ctx):
     Gaussian(1.0).reconstruct(np.zeros((1, 4, 4), np.float32), None, None)
     _mis_stats(np.zeros(1, np.int32), np.zeros(1, np.int8), np.zeros(1, np.float32), np.zeros(1, np.float32),
                np.zeros((1, 2)), np.zeros((1, 2)))
-    from .grid.guides import _mix_moments
+    from .mixing import _mix_moments
 
     f32 = np.zeros(1, np.float32)
-    _mix_moments(np.zeros(1, np.int32), np.zeros(1, np.int8), f32, f32, f32, f32, np.ones(1), np.ones(1),
-                 np.zeros((1, 1)), np.zeros(1))
+    _mix_moments(np.zeros(1, np.int32), np.zeros(1, np.int8), f32, f32, f32, False, f32, f32, f32, np.ones(1),
+                 np.ones(1), np.zeros((1, 1)), np.zeros(1))
 
 
 class FrozenGuide(Guide):

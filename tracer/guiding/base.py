@@ -12,6 +12,8 @@ render() and the integrator ask of it:
     observe(records)       the vertices of a wave of camera paths (guiding.records), in passes run
                            with learn=True
     update()               between passes: learn from what was observed, rebuild the maps
+    training_done()        before each training iteration (Algorithm 1): True ends training early
+    finish_training()      after the last training pass, before the final passes (Algorithm 1)
     schedule(session)      the passes of the render (tracer.session.Session): by default the final
                            passes alone; guides that learn run their own (e.g. Algorithm 1)
     split_plan(films, crop)   the splitting.SplitPlan of the final passes, or None
@@ -66,6 +68,11 @@ class Guide:
         """Whether final passes may split paths (the wave buffers then need room for copies)."""
         return self.splitting is not None and self.splitting.active
 
+    def records_direct(self, ctx):
+        """Whether this render's records (and photon maps) carry the emission a direction hits
+        directly: with `learn_direct`, or with next-event estimation off (nothing else samples it)."""
+        return self.learn_direct or not ctx.nee
+
     def prepare(self, scene, ctx):
         pass
 
@@ -81,6 +88,13 @@ class Guide:
 
     def update(self):
         pass
+
+    def training_done(self):
+        """Before each training iteration of Algorithm 1: whether to end training now."""
+        return False
+
+    def finish_training(self):
+        """After the last training pass: what the final passes sample from is settled here."""
 
     def schedule(self, session):
         """Run the render's passes: Algorithm 1 (guiding.grid.schedule) for a guide that learns, else the

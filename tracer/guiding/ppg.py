@@ -22,6 +22,7 @@ from ..errors import SettingsError
 from ..film import Film
 from .base import Guide, _float, _int
 from .contract import QUADTREE, empty_state
+from .mixing import VarianceMixing
 from .sdtree import SDTree
 
 
@@ -31,8 +32,11 @@ class PPGGuide(Guide):
 
     name = "ppg"
     learns = True
+    # learn_alpha 1: per spatial leaf, the weight of least second moment in [alpha_min, alpha_max]
+    # (guiding.mixing, as the histogram guides'; the 2019 notes' learned fraction); 0: alpha everywhere
     DEFAULTS = {"iterations": 12, "spp_init": 1, "train_budget": 0.5, "split_c": 12000.0, "rho": 0.01,
-                "max_depth": 20, "alpha": 0.8, "direct": 0}
+                "max_depth": 20, "alpha": 0.8, "direct": 0, "learn_alpha": 1, "alpha_min": 0.2, "alpha_max": 0.8,
+                "mis_min_samples": 32, "switch_off": 1.0}
     fixed_bytes = 64 << 20
 
     @property
@@ -54,6 +58,13 @@ class PPGGuide(Guide):
         if s["direct"] not in (0, 1) or isinstance(s["direct"], bool):
             raise SettingsError(f"guide setting direct must be 0 or 1, got {s['direct']!r}")
         self.learn_direct = bool(s["direct"])
+        if s["learn_alpha"] not in (0, 1) or isinstance(s["learn_alpha"], bool):
+            raise SettingsError(f"guide setting learn_alpha must be 0 or 1, got {s['learn_alpha']!r}")
+        self.learn_alpha = bool(s["learn_alpha"])
+        self.alpha_min = _float("alpha_min", s["alpha_min"], 0.0, 1.0)
+        self.alpha_max = _float("alpha_max", s["alpha_max"], self.alpha_min, 1.0)
+        self.q_thr = _float("mis_min_samples", s["mis_min_samples"], 1.0)
+        self.switch_off = _float("switch_off", s["switch_off"], 0.0)
         self.settings = s
         self.grid = None
 
@@ -65,7 +76,11 @@ class PPGGuide(Guide):
         self._state = empty_state()
         self.time_learning = self.time_update = 0.0
         self.peak_memory = 0
-        self.info = {"vertices": 0}
+        self.info = {"vertices": 0, "switched_off": False}
+        self._alpha = np.full(1, self.alpha)  # per SD-tree node
+        self._mixing = (VarianceMixing(self.alpha_min, self.alpha_max, self.q_thr, self.switch_off,
+                                       self.records_direct(ctx))
+                        if self.learn_alpha else None)
 
     def warm_up(self, ctx):
         t = SDTree(np.zeros(3), np.ones(3), self.rho, self.max_depth)
@@ -87,24 +102,43 @@ class PPGGuide(Guide):
             energy = rec.radiance[keep].astype(np.float64) / rec.pdf[keep].astype(np.float64)
             self.grid.record(rec.x[keep].astype(np.float64), rec.wi[keep].astype(np.float64), energy)
             self.info["vertices"] += int(keep.sum())
+            if self._mixing is not None:
+                self._mixing.observe(rec, self._alpha)
         self.time_learning += time.perf_counter() - t0
 
     def update(self):
         t0 = time.perf_counter()
         if self.grid is not None:
+            if self._mixing is not None:
+                self._alpha = _grown(self._alpha, self.grid.child.size, self.alpha)
+                self._mixing.choose(self._alpha)  # before the split: children take their parent's weight
+            old = self.grid.child.size
             self.grid.step(self.c * math.sqrt(self._spp / 4.0))
-            self._state = self._export(self.grid)
+            self._alpha = _inherited(_grown(self._alpha, self.grid.child.size, self.alpha), self.grid.child, old)
+            self._state = self._export(self.grid, self._alpha)
             self.peak_memory = max(self.peak_memory, self.memory_bytes())
         self.iteration += 1
         self._spp = self.spp_init * 2 ** self.iteration  # the next training iteration's spp
         self.time_update += time.perf_counter() - t0
 
-    def _export(self, tree):
+    def training_done(self):
+        """Training ends early where the guide clearly does not pay (guiding.mixing)."""
+        return self._mixing is not None and self._mixing.training_done()
+
+    def finish_training(self):
+        """Where the guide does not pay (guiding.mixing, `switch_off`), the final passes sample the
+        BSDF alone (stats: switched_off)."""
+        if self._mixing is not None and self._mixing.switched_off():
+            self.info["switched_off"] = True
+            self._state = empty_state()
+
+    def _export(self, tree, alpha=None):
         child, axis, split, slot, qc, qv, roots = tree.export()
         s = 1.0 / tree.side
+        alpha = np.full(child.size, self.alpha) if alpha is None else np.ascontiguousarray(alpha[: child.size])
         return empty_state()._replace(
             lo=tree.lo.copy(), inv_cell=np.full(3, s), res=np.ones(3, np.int64), child=child, axis=axis, split=split,
-            slot=slot, alpha=np.full(child.size, self.alpha), family=QUADTREE, qt_child=np.ascontiguousarray(qc),
+            slot=slot, alpha=alpha, family=QUADTREE, qt_child=np.ascontiguousarray(qc),
             qt_value=np.ascontiguousarray(qv), qt_root=np.ascontiguousarray(roots))
 
     def fixed_state(self, sampling_map):
@@ -148,6 +182,8 @@ class PPGGuide(Guide):
     def stats(self):
         out = dict(self.info)
         out.update({"name": self.name, "iterations_done": self.iteration, "settings": dict(self.settings)})
+        if self._mixing is not None:
+            out["predicted_ratios"] = [round(r, 4) for r in self._mixing.ratios]
         t = self.grid
         if t is not None:
             slot = t.export()[3]
@@ -155,3 +191,19 @@ class PPGGuide(Guide):
             out.update({"voxels": int(leaves.size), "voxels_with_map": int((slot[leaves] >= 0).sum()),
                         "dtree_nodes": int(sum(t.sampling[i][0].shape[0] for i in leaves))})
         return out
+
+
+def _grown(alpha, n, fill):
+    """alpha (per SD-tree node) extended to n nodes with `fill`."""
+    return alpha if alpha.size >= n else np.concatenate([alpha, np.full(n - alpha.size, fill)])
+
+
+def _inherited(alpha, child, old):
+    """alpha with the nodes made by the last split (index `old` on) given their parent's weight
+    (children are appended after their parent, so one pass in index order reaches grandchildren)."""
+    out = alpha.copy()
+    for i in np.flatnonzero(child >= 0):
+        c = child[i]
+        if c >= old:
+            out[c] = out[c + 1] = out[i]
+    return out

@@ -31,6 +31,8 @@ class Records(NamedTuple):
     pb: np.ndarray  # (R,) float32 the BSDF's own density of wi (pdf is the mixture's)
     radiance: np.ndarray  # (R,) float32 luminance of the radiance that came back along wi
     prev: np.ndarray  # (R,) int64 record of the path's previous vertex (-1: first hit, or after a delta vertex)
+    direct: np.ndarray  # (R,) float32 luminance of the emission wi hits directly, without MIS weight (0: none)
+    plight: np.ndarray  # (R,) float32 next-event estimation's solid-angle density of that emission (0: none)
 
     @staticmethod
     def allocate(size):
@@ -39,7 +41,8 @@ class Records(NamedTuple):
                        strategy=np.full(size, -1, np.int8), node=np.full(size, -1, np.int32),
                        path=np.zeros(size, np.int64), pixel=np.zeros(size, np.int64), L0=np.zeros((size, 3)),
                        beta=np.zeros((size, 3)), pb=np.zeros(size, np.float32), radiance=np.zeros(size, np.float32),
-                       prev=np.full(size, -1, np.int64))
+                       prev=np.full(size, -1, np.int64), direct=np.zeros(size, np.float32),
+                       plight=np.zeros(size, np.float32))
 
     def grown(self, size, used):
         """A larger Records holding the first `used` entries of this one."""

@@ -25,12 +25,13 @@ Depths follow Mitsuba 3: `max_depth` 1 shows emitters seen directly, 2 adds dire
 bounce numbered `rr_depth` on, continuing with probability min(max(beta / gain), 0.95), where
 beta / gain is the throughput BSDF sampling would have given (shading.russian_roulette).
 """
+import math
 import time
 
 import numpy as np
 from numba import prange
 
-from .._jit import kernel
+from .._jit import jit, kernel
 from ..film import aovs_of, combine_films
 from ..guiding.records import finalize_records
 from ..guiding.contract import locate
@@ -52,12 +53,30 @@ RECORD_ALL = 1  # records of the full incident radiance
 RECORD_INDIRECT = 2  # records of the radiance less the emission the direction hits directly (NEE's part)
 
 
+@jit(inline="always")
+def record_emission(r, record, b, le, w, pdf, r_L0, r_direct, r_plight):
+    """Emission le (MIS weight w) found along the direction of record r, sampled with density pdf,
+    by a path of throughput b: RECORD_ALL counts it in full in the record's radiance,
+    RECORD_INDIRECT not at all (its L0 takes what L gained); either way the record keeps its
+    luminance (`direct`) and next-event estimation's density of it (`plight`, from the power
+    heuristic's weight: w = pdf^2 / (pdf^2 + plight^2))."""
+    x_le = -(1.0 - w) if record == RECORD_ALL else w
+    for c in range(3):
+        r_L0[r, c] += b[c] * le[c] * x_le
+    r_direct[r] += 0.2126 * le[0] + 0.7152 * le[1] + 0.0722 * le[2]
+    if w > 0.0:
+        r_plight[r] = pdf * math.sqrt(max(1.0 - w, 0.0) / w)
+    else:
+        r_plight[r] = np.inf
+
+
 @kernel
 def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs,
           ps, max_depth, rr_depth, nee,
           beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open, prev_rec,
           alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow, record, rec_base,
-          r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0, r_beta, r_pb, r_radiance, r_prev):
+          r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0, r_beta, r_pb, r_radiance, r_prev,
+          r_direct, r_plight):
     """One bounce for every active path: emission, NEE sample, direction sample, roulette.
 
     The parameters come in bundles, each splatted by trace_wave from one declared field list (the
@@ -105,9 +124,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs,
                     for c in range(3):
                         L_cam[i, c] = b[c] * le[c] * w
                 if record != RECORD_NONE and prev_rec[i] >= 0:
-                    x_le = -(1.0 - w) if record == RECORD_ALL else w
-                    for c in range(3):
-                        r_L0[prev_rec[i], c] += b[c] * le[c] * x_le
+                    record_emission(prev_rec[i], record, b, le, w, prev_pdf[i], r_L0, r_direct, r_plight)
             continue
 
         # Hit point (from barycentrics: on the triangle's plane) and geometric normal
@@ -124,9 +141,7 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs,
                 for c in range(3):
                     L_cam[i, c] = b[c] * le[c] * w
             if record != RECORD_NONE and prev_rec[i] >= 0:
-                x_le = -(1.0 - w) if record == RECORD_ALL else w
-                for c in range(3):
-                    r_L0[prev_rec[i], c] += b[c] * le[c] * x_le
+                record_emission(prev_rec[i], record, b, le, w, prev_pdf[i], r_L0, r_direct, r_plight)
 
         sf = surface_at(surf, p, b1[k], b2[k])  # the BSDF there, textures evaluated, and its frame
         delta = write_aovs(sf, i, dk, cos_o, t[k], aov, aov_open)
@@ -176,6 +191,8 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs,
             r_pdf[r] = pdf
             r_pb[r] = pbs
             r_fcos[r] = (0.2126 * wt[0] + 0.7152 * wt[1] + 0.0722 * wt[2]) * pdf
+            r_direct[r] = 0.0
+            r_plight[r] = 0.0
             for c in range(3):
                 r_x[r, c] = x[c]
                 r_n[r, c] = nf[c]

@@ -33,7 +33,8 @@ render adds each pixel's value from the training passes' image.
 Direct light: next-event estimation already samples the light that a vertex receives straight
 from the emitters, so by default (`direct` 0) the maps learn the rest: photons deposit from their
 second hit on, and a camera vertex's record leaves out the emission its direction hits. With
-`direct` 1 the maps learn the full incident light, as in the paper.
+`direct` 1, or with next-event estimation off (Guide.records_direct), the maps learn the full
+incident light, as in the paper.
 
 Sides of surfaces (`normal_classes` 6, the default): a cell holds six trees, one per class of the
 normal on the side of the surface that a camera path or photon arrives on (its dominant axis and
@@ -47,10 +48,14 @@ The schedule is Algorithm 1 (tracer/guiding/grid/schedule.py); this module learn
 - `mixing` eq14 (the paper's): once a voxel has `mis_min_samples` vertices of both strategies,
   a = mean L_bsdf / (mean L_bsdf + mean L_guide), L = radiance x |f cos| of each vertex's direction.
 - `mixing` variance (default): once a voxel had `mis_min_samples` vertices in an iteration, a is
-  the one of N_ALPHA evenly spaced candidates whose one-sample estimate F / p_a has the least
-  second moment, estimated from those vertices (see _mix_moments). Eq. 14 looks at means only: where
-  a map misses light, BSDF-sampled directions carry weights up to 1/a, and along a path these
-  multiply into heavy tails (docs/guiding.md).
+  the one of N_ALPHA evenly spaced candidates whose estimate has the least second moment,
+  estimated from those vertices, with the direct light weighed against next-event estimation's
+  density (tracer.guiding.mixing). Eq. 14 looks at means only: where a map misses light,
+  BSDF-sampled directions carry weights up to 1/a, and along a path these multiply into heavy
+  tails (docs/guiding.md).
+- `switch_off` (with `mixing` variance): where the chosen weights are predicted to leave more than
+  `switch_off` x the second moment of BSDF sampling alone, training ends and the final passes
+  sample the BSDF alone (tracer.guiding.mixing; docs/guiding.md, "A guide that does not lose").
 """
 import math
 import time
@@ -69,6 +74,7 @@ from .photons import env_aim, trace_photons
 from .reconstruct import RECONSTRUCTORS, make_reconstructor
 from .spatial import HierarchicalGrid
 from ..contract import empty_state
+from ..mixing import VarianceMixing
 
 COMMON = {
     "iterations": 5,  # training iterations T after the pilot pass
@@ -90,9 +96,9 @@ COMMON = {
     "split": 0.0,  # > 0: final passes split paths whose throughput exceeds this (tracer.splitting); 0: off
     "window": 0.0,  # > 0: final passes' weight window splits paths expected to bring more than this x their pixel
     "window_low": 0.2,  # ... and rouletted those expected to bring less than this x their pixel
+    "switch_off": 1.0,  # > 0: final passes sample the BSDF alone where the guide predicts less gain (see finish_training)
 }
 MIXING = ("eq14", "variance")
-N_ALPHA = 7  # candidate mixing weights of `mixing variance`, evenly spaced over [alpha_min, alpha_max]
 
 
 @jit
@@ -104,31 +110,6 @@ def _mis_stats(node, strategy, radiance, fcos, mis_sum, mis_n):
             continue
         mis_sum[nd, s] += radiance[i] * fcos[i]
         mis_n[nd, s] += 1.0
-
-
-@jit
-def _mix_moments(node, strategy, radiance, fcos, pdf, pb, alpha, cand, mom, mom_n):
-    """For `mixing variance`: per voxel and candidate weight c, the second moment of the one-sample
-    estimate F / p_c (F = radiance |f cos| of the vertex, p_c = c p_bsdf + (1 - c) p_guide),
-    estimated from the vertices sampled with the current mixture p by importance reweighting:
-    E_p[F^2 / (p_c p)] = integral of F^2 / p_c. F includes the whole rest of its path, so heavy
-    tails that the maps cause further down the path count too."""
-    for i in range(node.shape[0]):
-        nd = node[i]
-        if nd < 0 or strategy[i] < 0:
-            continue
-        a = alpha[nd]
-        p = pdf[i]
-        if a >= 1.0 or not p > 0.0:
-            continue
-        pg = max((p - a * pb[i]) / (1.0 - a), 0.0)
-        f = radiance[i] * fcos[i]
-        mom_n[nd] += 1.0
-        if not f > 0.0:
-            continue
-        for k in range(cand.shape[0]):
-            pc = cand[k] * pb[i] + (1.0 - cand[k]) * pg
-            mom[nd, k] += f * f / (pc * p) if pc > 0.0 else np.inf
 
 
 @kernel
@@ -194,7 +175,7 @@ class HistogramGuide(Guide):
         if s["normal_classes"] not in (1, 6) or isinstance(s["normal_classes"], bool):
             raise SettingsError(f"guide setting normal_classes must be 1 or 6, got {s['normal_classes']!r}")
         self.n_class = int(s["normal_classes"])
-        self.alpha_candidates = np.linspace(self.alpha_min, self.alpha_max, N_ALPHA)
+        self.switch_off = _float("switch_off", s["switch_off"], 0.0)  # acts with mixing variance only
         if s["reconstruct"] not in RECONSTRUCTORS:
             raise SettingsError(f"guide setting reconstruct: unknown {s['reconstruct']!r}; valid: "
                                 + ", ".join(sorted(RECONSTRUCTORS)))
@@ -230,8 +211,9 @@ class HistogramGuide(Guide):
         self.reconstructor.time_inference = 0.0  # network inference (reconstruct cnn); not in time_update
         self.reconstructor.maps_inferred = 0
         self.peak_memory = 0
-        self.info = {"photons": 0, "deposits": 0, "photon_rays": 0, "vertices": 0}
-        self._mom = self._mom_n = None
+        self.info = {"photons": 0, "deposits": 0, "photon_rays": 0, "vertices": 0, "switched_off": False}
+        self._mixing = VarianceMixing(self.alpha_min, self.alpha_max, self.q_thr, self.switch_off,
+                                      self.records_direct(ctx))
 
     def state(self):
         return self._state
@@ -250,11 +232,7 @@ class HistogramGuide(Guide):
             if self.splitting.window > 0.0:
                 observe_outgoing(g, rec)
             if self.mixing == "variance":
-                if self._mom is None or self._mom.shape[0] < g.alpha.shape[0]:
-                    self._mom = np.zeros((g.alpha.shape[0], N_ALPHA))
-                    self._mom_n = np.zeros(g.alpha.shape[0])
-                _mix_moments(rec.node, rec.strategy, rec.radiance, rec.fcos, rec.pdf, rec.pb, g.alpha,
-                             self.alpha_candidates, self._mom, self._mom_n)
+                self._mixing.observe(rec, g.alpha)
             self._observe_data(rec)
         self.time_learning += time.perf_counter() - t0
 
@@ -266,7 +244,7 @@ class HistogramGuide(Guide):
         else:
             self.grid.recycle(self.iteration)
             if self.mixing == "variance":
-                self._choose_alpha()  # before the splits, which copy a voxel's weight to its children
+                self._mixing.choose(self.grid.alpha)  # before the splits, which copy a voxel's weight to its children
             self._iterate_data()
             self.grid.split_mid(self.c * math.sqrt(2.0 ** self.iteration), self.max_levels)
         t1 = time.perf_counter()
@@ -280,6 +258,20 @@ class HistogramGuide(Guide):
             self.peak_memory = max(self.peak_memory, self.memory_bytes())
         self.time_update += time.perf_counter() - t1 - (self.time_inference - inf0)
         self.iteration += 1
+
+    def training_done(self):
+        """Training ends early where the guide clearly does not pay (guiding.mixing)."""
+        return self._mixing.training_done()
+
+    def finish_training(self):
+        """Where the guide does not pay (guiding.mixing, `switch_off`), the final passes sample the
+        BSDF alone, without map lookups or splitting (stats: switched_off)."""
+        if self._mixing.switched_off():
+            self.info["switched_off"] = True
+            self._state = empty_state(self.map_height, self.map_width)
+
+    def split_plan(self, films, crop):
+        return None if self.info["switched_off"] else super().split_plan(films, crop)
 
     def fixed_state(self, sampling_map):
         """A state whose whole space is one voxel holding `sampling_map` (n_theta, n_phi) as its
@@ -303,7 +295,7 @@ class HistogramGuide(Guide):
 
     def stats(self):
         g = self.grid
-        out = dict(self.info)
+        out = dict(self.info, predicted_ratios=[round(r, 4) for r in self._mixing.ratios])
         out.update({"name": self.name, "iterations_done": self.iteration, "settings": dict(self.settings),
                     "reconstruct": self.reconstructor.describe(),
                     "maps_inferred": int(self.reconstructor.maps_inferred)})
@@ -362,16 +354,6 @@ class HistogramGuide(Guide):
         g.set_maps(slots, build_tables(rec))
         g.prev[slots] = maps.reshape(slots.size, -1)
         g.pcount[slots] = counts.reshape(slots.size, -1)
-
-    def _choose_alpha(self):
-        """`mixing variance`: each voxel with mis_min_samples vertices this iteration takes the
-        candidate weight of least estimated second moment."""
-        if self._mom is None:
-            return
-        g = self.grid
-        ok = np.flatnonzero(self._mom_n >= self.q_thr)
-        g.alpha[ok] = self.alpha_candidates[np.argmin(self._mom[ok], axis=1)]
-        self._mom = self._mom_n = None
 
     def _update_alpha(self):
         if self.mixing != "eq14":
@@ -493,7 +475,7 @@ class PhotonGuide(HistogramGuide):
         imp = g.state(importance=True) if guided and self.light_guiding > 0.0 else None
         n, dep, rays, ne, nt, ni = trace_photons(
             self.ctx, g.lookup_state(), g.data_slot[: g.n_nodes], self._n_photons(iteration), iteration, sink,
-            first_hit=self.learn_direct, imp=imp, p_imp=self.light_guiding, aim=self._aim())
+            first_hit=self.records_direct(self.ctx), imp=imp, p_imp=self.light_guiding, aim=self._aim())
         self.info["photons"] += n
         self.info["deposits"] += dep
         self.info["photon_rays"] += rays

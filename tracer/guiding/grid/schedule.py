@@ -3,8 +3,10 @@
 A 1-spp pilot (unguided, its vertices start the grid), training iterations t = 1, 2, ... of
 2^t N_c spp, each followed by the guide's update, while they fit (with spp: while the final pass
 gets at least as many samples as the iteration; with a time budget: while twice the estimated
-cost fits in the budget and the iteration ends within `train_budget` of it), then the final
-guided passes with what the budget has left. The image combines the training iterations and the
+cost fits in the budget and the iteration ends within `train_budget` of it, and while the guide's
+training_done() says no), then the guide's
+finish_training() (where it may switch itself off), then the final passes with what the budget
+has left. The image combines the training iterations and the
 final passes weighted by the inverse of each one's mean pixel variance (the pilot is not used).
 """
 
@@ -14,6 +16,8 @@ def algorithm1(session, guide):
     session.phase("pilot")
     session.run_pass(session.new_film("pilot"), 1, "pilot", learn=True)
     for t in range(1, guide.iterations + 1):
+        if guide.training_done():
+            break
         n = guide.spp_init * 2 ** t
         if session.time is None:
             if session.sample0 + 2 * n > session.spp:
@@ -27,4 +31,6 @@ def algorithm1(session, guide):
         film = session.new_film("train")
         session.phase(f"train {t}/{guide.iterations}")
         session.run_pass(film, n, "train", learn=True)
+    guide.finish_training()
+    session.ctx.guide_state = guide.state()  # what the final passes sample from
     session.final_passes(guide.split_plan(session.training_films(), session.ctx.crop))
