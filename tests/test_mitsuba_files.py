@@ -361,7 +361,7 @@ def test_a_shared_0_6_scene_loads_and_renders():
 
 @pytest.mark.skipif(not os.path.isdir(SHARED), reason="../shared/scenes-mitsuba not present")
 def test_mitsuba_loads_the_copies_of_the_shared_0_6_scenes(tmp_path):
-    """bench.vs_mitsuba's copy of each 0.6 scene (which Mitsuba 3 rejects as published) loads in
+    """bench.vs_mitsuba's copy of a 0.6 scene (which Mitsuba 3 rejects as published) loads in
     Mitsuba 3 at the size asked for, and its conductors' eta and k (extEta folded in) are the values
     the tracer's reader gives the same BSDFs (detects the two sides reading a scene differently)."""
     mi = pytest.importorskip("mitsuba")
@@ -371,7 +371,7 @@ def test_mitsuba_loads_the_copies_of_the_shared_0_6_scenes(tmp_path):
     from bench.vs_mitsuba import mitsuba_copy
     from tracer import bsdfs
 
-    for name in ("staircase", "bathroom", "spaceship"):
+    for name in ("spaceship",):  # (bench.vs_mitsuba loads all three; one here keeps the suite short)
         path = os.path.join(SHARED, name, "scene.xml")
         copy, notes = mitsuba_copy(path, str(tmp_path), size=(40, 30))
         assert "conductor extEta folded into eta and k" in notes
