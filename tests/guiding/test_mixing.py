@@ -22,6 +22,13 @@ def _draw(rng, n, F, pb, pg, a):
                 pb=pb[k].astype(np.float32)), k
 
 
+def _random_densities(rng, K):
+    """A BSDF density over K bins bounded away from 0, and a guide's that may be near 0."""
+    pb = rng.random(K) + 0.1
+    pg = rng.random(K) ** 2
+    return pb / pb.sum(), pg / pg.sum()
+
+
 def _moments(rec, a, full=False):
     mom, mom_n = np.zeros((1, N_ALPHA)), np.zeros(1)
     zero = np.zeros(rec["node"].size, np.float32)
@@ -34,10 +41,7 @@ def test_second_moments_are_unbiased_for_every_candidate():
     rng = np.random.default_rng(3)
     K = 12
     F = rng.random(K) ** 3
-    pb = rng.random(K) + 0.1
-    pb /= pb.sum()
-    pg = rng.random(K) ** 2
-    pg /= pg.sum()
+    pb, pg = _random_densities(rng, K)
     a, n = 0.5, 200_000
     rec, k = _draw(rng, n, F, pb, pg, a)
     mom, mom_n = _moments(rec, a)
@@ -71,10 +75,7 @@ def test_direct_light_counts_against_next_event_density(full):
     F = rng.random(K) ** 2
     D = np.where(rng.random(K) < 0.4, 3.0 * rng.random(K), 0.0)
     pl = np.where(D > 0, rng.random(K) * 0.3, 0.0)
-    pb = rng.random(K) + 0.1
-    pb /= pb.sum()
-    pg = rng.random(K) ** 2
-    pg /= pg.sum()
+    pb, pg = _random_densities(rng, K)
     a, n = 0.4, 200_000
     rec, k = _draw(rng, n, F, pb, pg, a)
     mom, _ = _moments(_with_direct(rec, k, D, pl, full), a, full)
