@@ -128,6 +128,11 @@ class Session:
         self.films.append((film, kind))
         return film
 
+    def leave_out_training(self):
+        """The training films so far become pilots: no weight in the image while a final film has
+        2 spp everywhere."""
+        self.films = [(f, "pilot" if k == "train" else k) for f, k in self.films]
+
     def training_films(self):
         """The films rendered so far (what a guide's split plan estimates pixels from)."""
         return [f for f, _ in self.films]

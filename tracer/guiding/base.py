@@ -94,7 +94,9 @@ class Guide:
         return False
 
     def finish_training(self):
-        """After the last training pass: what the final passes sample from is settled here."""
+        """After the last training pass: what the final passes sample from is settled here. Returns
+        True where the guide switched itself off (the final passes sample the BSDF alone)."""
+        return False
 
     def schedule(self, session):
         """Run the render's passes: Algorithm 1 (guiding.grid.schedule) for a guide that learns, else the

@@ -131,6 +131,7 @@ class PPGGuide(Guide):
         if self._mixing is not None and self._mixing.switched_off():
             self.info["switched_off"] = True
             self._state = empty_state()
+        return self.info["switched_off"]
 
     def _export(self, tree, alpha=None):
         child, axis, split, slot, qc, qv, roots = tree.export()

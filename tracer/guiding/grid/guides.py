@@ -269,6 +269,7 @@ class HistogramGuide(Guide):
         if self._mixing.switched_off():
             self.info["switched_off"] = True
             self._state = empty_state(self.map_height, self.map_width)
+        return self.info["switched_off"]
 
     def split_plan(self, films, crop):
         return None if self.info["switched_off"] else super().split_plan(films, crop)

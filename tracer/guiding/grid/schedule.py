@@ -7,7 +7,10 @@ cost fits in the budget and the iteration ends within `train_budget` of it, and 
 training_done() says no), then the guide's
 finish_training() (where it may switch itself off), then the final passes with what the budget
 has left. The image combines the training iterations and the
-final passes weighted by the inverse of each one's mean pixel variance (the pilot is not used).
+final passes weighted by the inverse of each one's mean pixel variance (the pilot is not used);
+where the guide switched itself off, the training iterations are left out too: they were guided
+where guiding does not pay, and their variance, estimated from a few spp where fireflies are
+rare, weighs them in too much (`veach-mis`, docs/failures.md).
 """
 
 
@@ -31,6 +34,7 @@ def algorithm1(session, guide):
         film = session.new_film("train")
         session.phase(f"train {t}/{guide.iterations}")
         session.run_pass(film, n, "train", learn=True)
-    guide.finish_training()
+    if guide.finish_training():
+        session.leave_out_training()
     session.ctx.guide_state = guide.state()  # what the final passes sample from
     session.final_passes(guide.split_plan(session.training_films(), session.ctx.crop))
