@@ -29,13 +29,16 @@ GUIDES = [g for g in guide_names() if hasattr(REGISTRY[g][0], "fixed_state")]  #
 # and paths split where they become overweight (split 1.5: often, so that the test sees it), and a
 # narrow weight window (which splits and roulettes often), and maps reconstructed by the network;
 # switch_off 0 so that the final passes are guided whatever the small scenes predict, and one
-# variant where the guide always switches itself off after training (guiding.mixing)
+# variant where the guide always switches itself off after training (guiding.mixing); ppg with
+# the 2019 filters
 VARIANTS = [(g, {"switch_off": 0}) for g in GUIDES] + [("photon", {"mixing": "eq14"}),
                                                        ("photon", {"light_guiding": 0.5, "switch_off": 0}),
                                                        ("photon", {"split": 1.5, "window": 0.0, "switch_off": 0}),
                                                        ("photon", {"window": 1.0, "window_low": 0.5, "switch_off": 0}),
                                                        ("photon", {"reconstruct": "cnn", "switch_off": 0}),
-                                                       ("photon", {"switch_off": 1e-9})]
+                                                       ("photon", {"switch_off": 1e-9}),
+                                                       ("ppg", {"spatial_filter": "stochastic",
+                                                                "directional_filter": "box", "switch_off": 0})]
 CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96), ("ajar-textured", 48, 36, 96)]
 N_TESTS = len(CASES) * len(VARIANTS) * 3
 

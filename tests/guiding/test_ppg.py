@@ -42,3 +42,14 @@ def test_ppg_learns_where_the_light_comes_from():
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     p_rand = np.sum(w * guide_pdf_batch(gs, x, n, d)) / w.sum()
     assert p_rec > 3.0 / (4 * np.pi) and p_rec > 3.0 * p_rand, (p_rec, p_rand, st)
+
+
+def test_filter_settings_are_checked():
+    """An unknown filter name is a SettingsError naming the setting and the allowed values."""
+    import pytest
+
+    from tracer.errors import SettingsError
+
+    for key, bad in (("spatial_filter", "box"), ("directional_filter", "gaussian")):
+        with pytest.raises(SettingsError, match=f"{key} must be one of"):
+            make_guide("ppg", **{key: bad})

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from tracer.guiding.quadtree import UNIFORM_DEPTH, qt_pdf_batch, qt_sample_batch, refine, splat, sums
+from tracer.guiding.quadtree import UNIFORM_DEPTH, qt_pdf_batch, qt_sample_batch, refine, splat, splat_box, sums
 from tracer.testing.chi2 import histogram_test
 
 # --- the twin: leaves (u0, v0, size, energy) -----------------------------------------------------
@@ -193,6 +193,46 @@ def test_splat_sums_and_refine_match_the_twin(rho, max_depth):
     assert got.shape == want.shape
     np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
     assert got[:, 2].min() >= 0.5 ** max_depth
+
+
+def test_box_splat_shares_each_record_by_overlap_as_the_twin_does():
+    """The box filter: each record's energy is shared among the leaves that a square of its own
+    leaf's size, centred on it and clipped to the unit square, overlaps, in proportion to the
+    overlap area (the twin: rectangle intersections with every leaf square). Detects a box of the
+    wrong size or centre, a missed or double-counted leaf, energy lost at the square's edges, and
+    a quadrant index with u and v swapped (the hot spot sits off the diagonal)."""
+    rng = np.random.default_rng(5)
+    leaves = random_leaves(rng, max_depth=6)
+    child, value, root = to_arrays(leaves)
+    value[:] = 0.0
+    n = 3000
+    d = random_dirs(rng, n)
+    d[:500] = np.array([0.3, -0.2, 0.93]) / np.linalg.norm([0.3, -0.2, 0.93])
+    d[500:520] = [0.0, 0.0, 1.0]  # u = 1: the square clipped at the edge
+    e = rng.gamma(1.0, size=n)
+    roots = np.full(n, root, np.int64)
+    roots[::11] = -1
+    splat_box(child, value, roots, d, e)
+    sums(child, value, root)
+    e[::11] = 0.0
+    u, v = to_uv(d)
+    want = np.zeros(len(leaves))
+    for k in range(n):
+        mine = (u[k] >= leaves[:, 0]) & (u[k] < leaves[:, 0] + leaves[:, 2]) & \
+               (v[k] >= leaves[:, 1]) & (v[k] < leaves[:, 1] + leaves[:, 2])
+        if not mine.any():  # u or v exactly 1: the last leaf along that side
+            uk, vk = min(u[k], 1 - 1e-15), min(v[k], 1 - 1e-15)
+            mine = (uk >= leaves[:, 0]) & (uk < leaves[:, 0] + leaves[:, 2]) & \
+                   (vk >= leaves[:, 1]) & (vk < leaves[:, 1] + leaves[:, 2])
+        h = leaves[np.argmax(mine), 2] / 2
+        a0, a1, b0, b1 = max(u[k] - h, 0), min(u[k] + h, 1), max(v[k] - h, 0), min(v[k] + h, 1)
+        ou = np.clip(np.minimum(a1, leaves[:, 0] + leaves[:, 2]) - np.maximum(a0, leaves[:, 0]), 0, None)
+        ov = np.clip(np.minimum(b1, leaves[:, 1] + leaves[:, 2]) - np.maximum(b0, leaves[:, 1]), 0, None)
+        want += e[k] * ou * ov / ((a1 - a0) * (b1 - b0))
+    leaves[:, 3] = want
+    np.testing.assert_allclose(leaves_of(child, value, root), leaves[np.lexsort((leaves[:, 2], leaves[:, 1],
+                                                                                 leaves[:, 0]))], rtol=1e-9, atol=1e-12)
+    assert value[root].sum() == pytest.approx(e.sum(), rel=1e-12)
 
 
 def test_an_empty_tree_refines_to_the_uniform_tree():

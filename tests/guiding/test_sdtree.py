@@ -53,6 +53,8 @@ def test_space_splits_by_ppgs_rule_and_tiles_the_cube():
     assert len(t.leaves) == want and want > n_before
     boxes = _boxes(t)
     assert math.isclose(sum(np.prod(s) for _, s in boxes.values()), 8.0)
+    leaves = np.array(sorted(boxes))
+    np.testing.assert_allclose(t.leaf_size(leaves), [boxes[int(i)][1] for i in leaves])
     pts = rng.random((5000, 3)) * 2.0
     for p, leaf in zip(pts, t.locate(pts)):
         lo, size = boxes[int(leaf)]
@@ -94,3 +96,24 @@ def test_records_become_the_next_iterations_sampling_trees():
     nc, nv = t.building[1]
     assert leaves_of(nc, np.ones_like(nv), 0)[:, 2].min() < 0.5 ** UNIFORM_DEPTH and not nv.any()
     assert (SDTree(np.zeros(3), np.ones(3)).export()[3] == -1).all()  # no records yet: no map anywhere
+
+
+def test_the_stochastic_spatial_filter_moves_records_within_their_leafs_box():
+    """With spatial_filter "stochastic" a record lands where a uniform offset within a box of its
+    leaf's size takes it: from x = 0.45 in the left half (box 0.5 wide along x), 40% land in the
+    right leaf (a binomial z-test at 4 sigma over 20,000 records; no filter gives 0%, a box of the
+    cube's size 45%, one of half the size 30%); the nearest filter moves nothing."""
+    rng = np.random.default_rng(2)
+    for f in ("stochastic", "nearest"):
+        t = SDTree(np.zeros(3), np.ones(3), spatial_filter=f, seed=7)
+        t.record(rng.random((6000, 3)), random_dirs(rng, 6000), np.ones(6000))
+        t.step(4000.0)  # one split along x at 0.5
+        assert t.leaves.tolist() == [1, 2] and t.split[0] == 0.5
+        m = 20_000
+        t.record(np.tile([0.45, 0.5, 0.98], (m, 1)), random_dirs(rng, m), np.ones(m))
+        share = t.weight[2] / m
+        if f == "nearest":
+            assert share == 0.0
+        else:
+            assert abs(share - 0.4) < 4 * math.sqrt(0.4 * 0.6 / m), share
+        assert t.weight.sum() == m

@@ -3,7 +3,8 @@ against: an SD-tree (tracer.guiding.sdtree) learned from camera paths over itera
 spp (the schedule of tracer.guiding.grid.schedule), sampled one-sample-MIS with the BSDF.
 
 Each camera vertex splats its incident radiance estimate L_i / pdf (luminance) into the D-tree of
-its spatial leaf, at its sampled direction (nearest filters). After each iteration the trees are
+its spatial leaf, at its sampled direction (nearest filters by default; `spatial_filter`
+"stochastic" and `directional_filter` "box" are the 2019 notes' filters, tracer.guiding.sdtree). After each iteration the trees are
 built and become the sampling trees, spatial leaves holding more than c sqrt(spp / 4) records split
 (spp: the iteration's samples per pixel; PPG's threshold with its 4 spp per pass), and the next
 building trees are refined where a quadrant holds more than `rho` of its tree's energy. The BSDF
@@ -36,7 +37,8 @@ class PPGGuide(Guide):
     # (guiding.mixing, as the histogram guides'; the 2019 notes' learned fraction); 0: alpha everywhere
     DEFAULTS = {"iterations": 12, "spp_init": 1, "train_budget": 0.5, "split_c": 12000.0, "rho": 0.01,
                 "max_depth": 20, "alpha": 0.8, "direct": 0, "learn_alpha": 1, "alpha_min": 0.2, "alpha_max": 0.8,
-                "mis_min_samples": 32, "switch_off": 1.0}
+                "mis_min_samples": 32, "switch_off": 1.0, "spatial_filter": "nearest", "directional_filter": "nearest"}
+    FILTERS = {"spatial_filter": ("nearest", "stochastic"), "directional_filter": ("nearest", "box")}
     fixed_bytes = 64 << 20
 
     @property
@@ -65,11 +67,15 @@ class PPGGuide(Guide):
         self.alpha_max = _float("alpha_max", s["alpha_max"], self.alpha_min, 1.0)
         self.q_thr = _float("mis_min_samples", s["mis_min_samples"], 1.0)
         self.switch_off = _float("switch_off", s["switch_off"], 0.0)
+        for key, allowed in self.FILTERS.items():
+            if s[key] not in allowed:
+                raise SettingsError(f"guide setting {key} must be one of {', '.join(allowed)}, got {s[key]!r}")
         self.settings = s
         self.grid = None
 
     def prepare(self, scene, ctx):
         self.bounds = np.asarray(scene.bounds, np.float64)
+        self._seed = ctx.seed
         self.grid = None  # the SD-tree, once a record arrived
         self.iteration = 0
         self._spp = 1  # samples per pixel of the pass being recorded (the pilot's)
@@ -83,7 +89,8 @@ class PPGGuide(Guide):
                         if self.learn_alpha else None)
 
     def warm_up(self, ctx):
-        t = SDTree(np.zeros(3), np.ones(3), self.rho, self.max_depth)
+        t = SDTree(np.zeros(3), np.ones(3), self.rho, self.max_depth,
+                   directional_filter=self.settings["directional_filter"])
         t.record(np.full((1, 3), 0.5), np.array([[0.0, 0.0, 1.0]]), np.ones(1))
         t.step(0.5)
         self._export(t)
@@ -98,7 +105,9 @@ class PPGGuide(Guide):
             if self.grid is None:
                 lo, hi = self.bounds
                 pad = 1e-4 * max(float(np.linalg.norm(hi - lo)), 1e-6)
-                self.grid = SDTree(lo - pad, hi + pad, self.rho, self.max_depth)
+                self.grid = SDTree(lo - pad, hi + pad, self.rho, self.max_depth,
+                                   spatial_filter=self.settings["spatial_filter"],
+                                   directional_filter=self.settings["directional_filter"], seed=self._seed)
             energy = rec.radiance[keep].astype(np.float64) / rec.pdf[keep].astype(np.float64)
             self.grid.record(rec.x[keep].astype(np.float64), rec.wi[keep].astype(np.float64), energy)
             self.info["vertices"] += int(keep.sum())

@@ -20,10 +20,12 @@ qt_sample and qt_pdf are not inlined into the kernels that call them: inlined in
 kernel, their loops added about 100 s to the test suite's compiles.
 
 Learning (PPG section 3.3): records splat their energy into the leaf holding their direction, each
-into the tree of its spatial leaf (`splat`); `refine` then builds the next tree from the filled one, splitting every quadrant that
-holds more than `rho` of the tree's energy, down to `max_depth` levels (a quadrant that was a leaf
-and still holds much energy splits at once over several levels, its energy shared evenly), and
-an empty tree becomes the uniform tree of depth 4 (the paper's start).
+into the tree of its spatial leaf (`splat`), or over the leaves a box of that leaf's size around it
+overlaps (`splat_box`, the 2019 notes' directional filter); `refine` then builds the next tree from
+the filled one, splitting every quadrant that holds more than `rho` of the tree's energy, down to
+`max_depth` levels (a quadrant that was a leaf and still holds much energy splits at once over
+several levels, its energy shared evenly), and an empty tree becomes the uniform tree of depth 4
+(the paper's start).
 """
 import math
 
@@ -162,6 +164,56 @@ def splat(child, value, roots, dirs, energy):
             u = 2.0 * u - (1.0 if hu else 0.0)
             v = 2.0 * v - (1.0 if hv else 0.0)
             n = c
+
+
+@jit
+def splat_box(child, value, roots, dirs, energy):
+    """Add energy[k] over the leaf quadrants that a square around dirs[k] overlaps, in proportion
+    to the overlap (the 2019 notes' box filter): the square is the size of the leaf holding dirs[k],
+    centred on it and clipped to the unit square, and its whole energy is shared among the leaves
+    it covers. roots[k] -1: skipped; the interior values are left to `sums`; sequential."""
+    stack_n = np.empty(4 * 64 + 8, np.int64)
+    stack_u = np.empty(4 * 64 + 8)
+    stack_v = np.empty(4 * 64 + 8)
+    stack_s = np.empty(4 * 64 + 8)
+    for k in range(dirs.shape[0]):
+        if roots[k] < 0:
+            continue
+        u, v = dir_to_uv((dirs[k, 0], dirs[k, 1], dirs[k, 2]))
+        n = roots[k]  # the size of the leaf holding (u, v)
+        size = 1.0
+        uu, vv = u, v
+        for _ in range(64):
+            hu = uu >= 0.5
+            hv = vv >= 0.5
+            size *= 0.5
+            c = child[n, (1 if hu else 0) + (2 if hv else 0)]
+            if c < 0:
+                break
+            uu = 2.0 * uu - (1.0 if hu else 0.0)
+            vv = 2.0 * vv - (1.0 if hv else 0.0)
+            n = c
+        a0, a1 = max(u - 0.5 * size, 0.0), min(u + 0.5 * size, 1.0)
+        b0, b1 = max(v - 0.5 * size, 0.0), min(v + 0.5 * size, 1.0)
+        area = (a1 - a0) * (b1 - b0)  # > 0: the square's centre is in the unit square
+        stack_n[0], stack_u[0], stack_v[0], stack_s[0] = roots[k], 0.0, 0.0, 1.0
+        top = 1
+        while top > 0:
+            top -= 1
+            n, lo_u, lo_v, half = stack_n[top], stack_u[top], stack_v[top], 0.5 * stack_s[top]
+            for i in range(4):
+                qu = lo_u + (i & 1) * half
+                qv = lo_v + (i >> 1) * half
+                ou = min(a1, qu + half) - max(a0, qu)
+                ov = min(b1, qv + half) - max(b0, qv)
+                if not (ou > 0.0 and ov > 0.0):
+                    continue
+                c = child[n, i]
+                if c < 0:
+                    value[n, i] += energy[k] * (ou * ov / area)
+                else:
+                    stack_n[top], stack_u[top], stack_v[top], stack_s[top] = c, qu, qv, half
+                    top += 1
 
 
 @jit

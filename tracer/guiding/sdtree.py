@@ -16,11 +16,16 @@ Between iterations (`step`):
    again from 0.
 
 `export()` gives the arrays a GuideState needs for the spatial tree and the sampling pool.
+
+Filters (Müller's 2019 notes), both off by default: `spatial_filter` "stochastic" moves each record
+by a uniform offset within a box the size of its leaf before it is located (a record near a
+leaf's face may land in the neighbour), `directional_filter` "box" shares a record's energy over
+the quadtree leaves that a square the size of its own leaf overlaps (quadtree.splat_box).
 """
 import numpy as np
 
 from .._jit import jit
-from .quadtree import MAX_DEPTH, refine, splat, sums
+from .quadtree import MAX_DEPTH, refine, splat, splat_box, sums
 
 
 @jit
@@ -62,8 +67,11 @@ def _tree(child, value, root):
 class SDTree:
     """The SD-tree of one render (see the module docstring)."""
 
-    def __init__(self, lo, hi, rho=0.01, max_depth=MAX_DEPTH, max_nodes=1 << 16):
+    def __init__(self, lo, hi, rho=0.01, max_depth=MAX_DEPTH, max_nodes=1 << 16, spatial_filter="nearest",
+                 directional_filter="nearest", seed=0):
         lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+        self.spatial_filter, self.directional_filter = spatial_filter, directional_filter
+        self._rng = np.random.default_rng(seed)
         side = float(np.max(hi - lo))
         self.lo, self.side = lo, max(side, 1e-12)
         self.rho, self.max_depth, self.max_nodes = float(rho), int(max_depth), int(max_nodes)
@@ -87,17 +95,27 @@ class SDTree:
     def locate(self, x):
         return locate_points(self.child, self.axis, self.split, np.ascontiguousarray(x, dtype=np.float64))
 
+    def leaf_size(self, nodes):
+        """Edge lengths (m, 3) of the boxes of `nodes` (axes x, y, z split in turn from the root)."""
+        d = self.depth[nodes][:, None]
+        return self.side * 0.5 ** ((d + 2 - np.arange(3)[None, :]) // 3)
+
     def record(self, x, dirs, energy):
         """Splat records: points x (m, 3), directions dirs (m, 3), energy (m,) into the building
-        trees of their leaves; each record adds 1 to its leaf's weight."""
+        trees of their leaves (after the filters); each record adds 1 to its leaf's weight."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        if self.spatial_filter == "stochastic" and x.shape[0]:
+            x = x + (self._rng.random(x.shape) - 0.5) * self.leaf_size(self.locate(x))
+            x = np.clip(x, self.lo, self.lo + self.side)
         leaf = self.locate(x)
         if self._pool is None:
             self._pool = _pool([self.building[i] if self.child[i] < 0 else (np.full((1, 4), -1, np.int32),
                                                                             np.zeros((1, 4)))
                                 for i in range(self.child.size)])
         child, value, roots = self._pool
-        splat(child, value, roots[leaf], np.ascontiguousarray(dirs, dtype=np.float64),
-              np.ascontiguousarray(energy, dtype=np.float64))
+        fn = splat_box if self.directional_filter == "box" else splat
+        fn(child, value, roots[leaf], np.ascontiguousarray(dirs, dtype=np.float64),
+           np.ascontiguousarray(energy, dtype=np.float64))
         self.weight += np.bincount(leaf, minlength=self.child.size)
 
     def _unpool(self):
