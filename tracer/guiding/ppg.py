@@ -4,15 +4,16 @@ spp (the schedule of tracer.guiding.grid.schedule), sampled one-sample-MIS with 
 
 Each camera vertex splats its incident radiance estimate L_i / pdf (luminance) into the D-tree of
 its spatial leaf, at its sampled direction (nearest filters by default; `spatial_filter`
-"stochastic" and `directional_filter` "box" are the 2019 notes' filters, tracer.guiding.sdtree). After each iteration the trees are
-built and become the sampling trees, spatial leaves holding more than c sqrt(spp / 4) records split
-(spp: the iteration's samples per pixel; PPG's threshold with its 4 spp per pass), and the next
-building trees are refined where a quadrant holds more than `rho` of its tree's energy. The BSDF
-is sampled with probability `alpha` wherever a tree has energy, alone where it has none: 0.8 by
-default, as the paper's 0.5 makes fireflies here (a BSDF-sampled direction where the tree has no
-energy weighs 1 / alpha, and these multiply along a path; on `ajar` at 128 spp, 0.5 gives 4.5x
-bsdf's relMSE, 56% of it in 20 pixels; 0.8 gives 1.0x; docs/ppg.md). With `direct` 0 (NEE on, the default) the records leave out the emission their
-direction hits (NEE samples it), PPG's "always" mode; with NEE off they carry it all. docs/ppg.md.
+"stochastic" and `directional_filter` "box" are the 2019 notes' filters, tracer.guiding.sdtree).
+After each iteration the trees are built and become the sampling trees, spatial leaves holding more
+than c sqrt(spp / 4) records split (spp: the iteration's samples per pixel; PPG's threshold with its
+4 spp per pass), and the next building trees are refined where a quadrant holds more than `rho` of
+its tree's energy. The BSDF is sampled with probability `alpha` wherever a tree has energy, alone
+where it has none: 0.8 by default, as the paper's 0.5 makes fireflies here (a BSDF-sampled direction
+where the tree has no energy weighs 1 / alpha, and these multiply along a path; on `ajar` at 128
+spp, 0.5 gives 4.5x bsdf's relMSE, 56% of it in 20 pixels; 0.8 gives 1.0x; docs/ppg.md). With
+`direct` 0 (NEE on, the default) the records leave out the emission their direction hits (NEE
+samples it), PPG's "always" mode; with NEE off they carry it all. docs/ppg.md.
 """
 import math
 import time

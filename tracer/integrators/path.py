@@ -32,6 +32,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit, kernel
+from ..bsdfs import lum
 from ..film import aovs_of, combine_films
 from ..guiding.records import finalize_records
 from ..guiding.contract import locate
@@ -63,7 +64,7 @@ def record_emission(r, record, b, le, w, pdf, r_L0, r_direct, r_plight):
     x_le = -(1.0 - w) if record == RECORD_ALL else w
     for c in range(3):
         r_L0[r, c] += b[c] * le[c] * x_le
-    r_direct[r] += 0.2126 * le[0] + 0.7152 * le[1] + 0.0722 * le[2]
+    r_direct[r] += lum(le)
     if w > 0.0:
         r_plight[r] = pdf * math.sqrt(max(1.0 - w, 0.0) / w)
     else:
