@@ -24,7 +24,10 @@ def test_convergence_writes_records_charts_and_table(tmp_path, monkeypatch):
     assert r["time_rendering"] <= r["time_total"] and r["guide_memory_bytes"] == 0
     assert r["scene"] == "box"
     for r in recs:  # every camera sample of the 8 x 8 image is counted, and bsdf has no guide time
-        assert r["samples"] == r["spp"] * 64
+        if r["budget"] == "spp":
+            assert r["samples"] == r["spp"] * 64
+        else:  # spp is the least per pixel: a last pass cut at the deadline adds samples to some pixels
+            assert r["spp"] * 64 <= r["samples"] < (r["spp"] + 64) * 64
         assert 0 < r["shade_s"] < r["time_total"]
         assert r["update_s"] == r["inference_s"] == r["time_learning"] == 0.0
     assert not [f for f in os.listdir(out) if ".tmp-" in f]  # every output renamed into place
