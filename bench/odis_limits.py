@@ -55,10 +55,11 @@ def main(argv=None):
     lines = ["# What limits odis (equal spp; mean over seeds, ratio to bsdf in brackets)", ""]
     for name in a.scenes.split(","):
         path = scene_path(name, a.scene_dir)
-        scene = tracer.load_scene(path)
+        full = reference_for(path)[0]  # renders at the reference's resolution (a Mitsuba film may be larger)
+        scene = tracer.load_scene(path, width=full.shape[1], height=full.shape[0])
         tracer.render(scene, spp=1)
         for depth in DEPTHS:
-            ref = depth3_reference(scene, name, a.out, a.ref_spp) if depth == 3 else reference_for(path)[0]
+            ref = depth3_reference(scene, name, a.out, a.ref_spp) if depth == 3 else full
             rows = {}
             for m in methods:
                 g_name, settings = method_spec(m)

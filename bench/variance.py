@@ -2,10 +2,13 @@
 
     python -m bench.variance --scenes ajar,cornell --methods bsdf,photon,photon:mixing=variance
     python -m bench.variance --scenes veach-ajar --scene-dir ../shared/scenes --scale 2 --seeds 5
+    python -m bench.variance --scenes veach-ajar --scene-dir ../shared/scenes-mitsuba --scale 1 \
+        --methods "bsdf/path:nee=0;photon/path:nee=0;photon:reference_photons=500/path:nee=0"
 
 Per scene, each guide is trained once (`--train-spp`, seed 99), then frozen
 (tracer.guiding.FrozenGuide) and rendered `--seeds` times at `--spp`; `bsdf` is rendered the same
-way. The figure is the relative variance of one sample, averaged over pixels:
+way (the first method whose guide is bsdf is the baseline; a method may name its integrator
+after a slash, e.g. `photon/path:nee=0`). The figure is the relative variance of one sample, averaged over pixels:
 mean(var_of_mean x spp / (R^2 + 0.01)), R the scene's reference (box-downsampled by `--scale`),
 i.e. the relMSE one sample would have; the lower, the better the learned sampling. It isolates
 the maps from learning cost and scheduling, which bench.convergence measures.
@@ -25,7 +28,7 @@ import numpy as np
 import tracer
 from tracer.guiding import FrozenGuide, make_guide
 
-from .common import method_spec, reference_for, scene_path
+from .common import check_method, reference_for, render_args, scene_path
 
 
 def relative_variance(film, ref, spp):
@@ -40,17 +43,18 @@ def downsample(img, s):
 
 
 def measure(scene, ref, method, spp, seeds, train_spp):
-    """Per-seed (relative variance, render seconds per spp) of `method` on `scene` (frozen after
-    training if a guide)."""
-    name, settings = method_spec(method)
+    """Per-seed (relative variance, render seconds per spp) of `method` (GUIDE[:K=V,...][/INTEGRATOR
+    [:K=V,...]], bench.common.render_args) on `scene`, frozen after training if a guide."""
+    args = render_args(method)
+    name, settings = args.pop("guide"), args.pop("guide_settings") or {}
     guide = "bsdf"
     if name != "bsdf":
         g = make_guide(name, **settings)
-        tracer.render(scene, spp=train_spp, guide=g, seed=99)
+        tracer.render(scene, spp=train_spp, guide=g, seed=99, **args)
         guide = FrozenGuide(g)
     out = []
     for s in range(seeds):
-        r = tracer.render(scene, spp=spp, guide=guide, seed=1000 + s)
+        r = tracer.render(scene, spp=spp, guide=guide, seed=1000 + s, **args)
         out.append((relative_variance(r.film, ref, spp), r.stats["time_total"] / spp))
     return out
 
@@ -74,12 +78,13 @@ def main(argv=None):
     p.add_argument("--scene-dir", default=None)
     a = p.parse_args(argv)
     methods = [m.strip() for m in a.methods.split(";" if ";" in a.methods else ",") if m.strip()]
-    if "bsdf" not in methods:
-        methods.insert(0, "bsdf")
-    methods.sort(key=lambda m: m != "bsdf")  # bsdf first: the ratios are against it
+    base_method = next((m for m in methods if m.partition("/")[0] == "bsdf"), None)
+    if base_method is None:
+        base_method = "bsdf"
+        methods.insert(0, base_method)
+    methods.sort(key=lambda m: m != base_method)  # bsdf first: the ratios are against it
     for m in methods:
-        name, settings = method_spec(m)
-        make_guide(name, **settings)
+        check_method(m)
     print(f"relative variance of one sample (mean over pixels of var / (R^2 + 0.01)); {a.spp} spp x "
           f"{a.seeds} seeds, guides trained at {a.train_spp} spp then frozen, 1/{a.scale} resolution; "
           f"mean over seeds, its standard error and min/max; ratio and efficiency from the means")
@@ -87,15 +92,15 @@ def main(argv=None):
           f"{'s/spp':>7s} {'eff vs bsdf':>11s}  per seed")
     for given in [s.strip() for s in a.scenes.split(",") if s.strip()]:
         path = scene_path(given, a.scene_dir)
-        ref = downsample(reference_for(path)[0], a.scale)
-        scene = tracer.load_scene(path)
-        scene = tracer.load_scene(path, width=scene.width // a.scale, height=scene.height // a.scale)
+        full = reference_for(path)[0]  # the reference's resolution (a Mitsuba scene's film may be larger)
+        ref = downsample(full, a.scale)
+        scene = tracer.load_scene(path, width=full.shape[1] // a.scale, height=full.shape[0] // a.scale)
         base = base_t = None
         for m in methods:
             vals, secs = zip(*measure(scene, ref, m, a.spp, a.seeds, a.train_spp))
             mean, sem, lo, hi = summarise(vals)
             t = float(np.median(secs))
-            if m == "bsdf":
+            if m == base_method:
                 base, base_t = mean, t
             ratio = f"{mean / base:8.2f}" if base else f"{'-':>8s}"
             eff = f"{mean * t / (base * base_t):11.2f}" if base else f"{'-':>11s}"

@@ -30,13 +30,14 @@ GUIDES = [g for g in guide_names() if hasattr(REGISTRY[g][0], "fixed_state")]  #
 # narrow weight window (which splits and roulettes often), and maps reconstructed by the network;
 # switch_off 0 so that the final passes are guided whatever the small scenes predict, and one
 # variant where the guide always switches itself off after training (guiding.mixing); ppg with
-# the 2019 filters
+# the 2019 filters; photon with its maps replaced by reference maps before the final passes
 VARIANTS = [(g, {"switch_off": 0}) for g in GUIDES] + [("photon", {"mixing": "eq14"}),
                                                        ("photon", {"light_guiding": 0.5, "switch_off": 0}),
                                                        ("photon", {"split": 1.5, "window": 0.0, "switch_off": 0}),
                                                        ("photon", {"window": 1.0, "window_low": 0.5, "switch_off": 0}),
                                                        ("photon", {"reconstruct": "cnn", "switch_off": 0}),
                                                        ("photon", {"switch_off": 1e-9}),
+                                                       ("photon", {"reference_photons": 16.0, "switch_off": 0}),
                                                        ("ppg", {"spatial_filter": "stochastic",
                                                                 "directional_filter": "box", "switch_off": 0})]
 CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96), ("ajar-textured", 48, 36, 96)]
@@ -73,6 +74,8 @@ def test_guided_mean_equals_bsdf_mean(case, variant, bsdf_renders):
     if opts.get("window"):
         assert r.stats["window_ended"] > 0, "the window ended no path: this test would not test its roulette"
     assert st["switched_off"] == (opts.get("switch_off") == 1e-9), st.get("predicted_ratios")
+    if opts.get("reference_photons"):
+        assert st["reference_photons"] == round(opts["reference_photons"] * w * h), st
     if st["switched_off"]:  # final passes of BSDF sampling alone: no splitting, no window
         assert r.stats["split_copies"] == 0 and r.stats["window_ended"] == 0
     m_g, v_g = image_mean(r)
@@ -376,6 +379,12 @@ def test_split_setting_is_checked(bad):
                                  {"window_low": -0.1}])
 def test_window_settings_are_checked(bad):
     with pytest.raises(SettingsError, match="window"):
+        make_guide("photon", **bad)
+
+
+@pytest.mark.parametrize("bad", [{"reference_photons": -1.0}, {"reference_photons": "8"}, {"reference_sigma": -0.5}])
+def test_reference_map_settings_are_checked(bad):
+    with pytest.raises(SettingsError, match="reference"):
         make_guide("photon", **bad)
 
 

@@ -164,6 +164,27 @@ def test_shipped_weights_reproduce_the_manifest():
     assert manifest["parameters"] == odis_net.parameter_count(model)
 
 
+@pytest.mark.parametrize("name", ["odis", "odis_w8"])
+def test_shipped_maps_are_not_clipped_flat(name):
+    """The network's outputs stay below expand's clip, and its maps are not flat. A clip below the
+    network's range (the KL loss leaves the outputs' scale free) makes the bright bins equal: a clip
+    at t = 3 once made the shipped width-4 maps uniform, which the manifest check then recorded
+    and which made odis lose to bsdf at max_depth 3."""
+    import torch
+
+    from learn.odis_train import check_input
+    from tracer.guiding.odis import net as odis_net
+
+    model, _ = odis_net.load(name)
+    x, v = check_input()
+    with torch.inference_mode():
+        t = model(torch.from_numpy(x), torch.from_numpy(v.astype(np.float32))).numpy()
+    assert t.max() < odis_net.T_MAX
+    y = odis_net.radiance_maps(model, x, v)
+    for m, ok in zip(y, v > 0):
+        assert m[ok].max() > 4.0 * m[ok].mean()
+
+
 @pytest.mark.parametrize("w,h,stride", [(11, 7, 4), (12, 3, 8), (5, 9, 16)])
 def test_pixel_maps_match_a_slow_twin(w, h, stride):
     from tracer.guiding.directional import build_tables
@@ -234,7 +255,7 @@ def test_odis_mean_equals_bsdf_mean(case):
     st = g.stats()
     assert st["fallback"] is None and st["pixels_guided"] > 0.5 * w * h, st
     kinds = [p["kind"] for p in r.stats["passes"]]
-    assert kinds[0] == "discard" and set(kinds[1:]) == {"final"} and r.stats["spp"] == spp
+    assert kinds[0] == "initial" and set(kinds[1:]) == {"final"} and r.stats["spp"] == spp
     m_g, v_g = image_mean(r)
     m_b, v_b = image_mean(b)
     assert_z(m_g, v_g + v_b, m_b, n_tests=3 * len(CASES), what=f"odis on {name} vs bsdf")
@@ -246,14 +267,40 @@ def test_the_initial_pass_never_enters_the_image(spp, initial, budget):
     # (rendered at max_depth 3) must get weight 0 always, and with a budget the initial pass
     # used up, one final pass still renders the image
     scene = _scene("cornell", 16, 16)
-    g = make_guide("odis", initial=initial, stride=4)
+    g = make_guide("odis", initial=initial, stride=4, reuse=0)
     r = tracer.render(scene, spp=spp, time=budget, guide=g, seed=5)
     assert_clean(r)
     passes = r.stats["passes"]
-    assert passes[0]["kind"] == "discard" and passes[0]["weight"] == 0.0
+    assert passes[0]["kind"] == "initial" and passes[0]["weight"] == 0.0
     assert all(p["kind"] == "final" and p["weight"] > 0 for p in passes[1:]) and len(passes) > 1
     if spp is not None:
         assert r.stats["spp"] == spp
+
+
+@pytest.mark.parametrize("max_depth", [3, -1])
+def test_a_reused_initial_pass_is_the_bsdf_render_of_its_samples(max_depth):
+    """With `reuse` (the default) the initial pass renders the image's own first samples: after it,
+    the film holds exactly what a plain BSDF render of as many spp holds (same keys, the render's
+    own depth, not the network's 3), bit for bit; its samples then stay in the image (the final
+    film counts every spp). Detects an initial pass traced at another depth or with other keys,
+    or its samples dropped or counted twice."""
+    scene = _scene("ajar", 24, 18)
+    seen = {}
+
+    def keep(i, film, stats):
+        seen.setdefault(i, (film.sum.copy(), film.count.copy()))
+
+    g = make_guide("odis", initial=2, stride=4)
+    r = tracer.render(scene, spp=6, guide=g, seed=9, max_depth=max_depth, callback=keep)
+    assert_clean(r)
+    assert g.stats()["initial_reused"] and g.stats()["fallback"] is None
+    kept = []
+    tracer.render(scene, spp=2, seed=9, max_depth=max_depth, callback=lambda i, film, st: kept.append(film.sum.copy()))
+    np.testing.assert_array_equal(seen[0][0], kept[-1])
+    assert (seen[0][1] == 2).all()
+    passes = r.stats["passes"]
+    assert passes[0]["kind"] == "initial" and all(p["weight"] == 1.0 for p in passes)  # one film
+    assert r.stats["spp"] == 6
 
 
 def test_no_light_and_no_surface_fall_back(tmp_path):
@@ -292,10 +339,19 @@ def test_one_spp_renders_the_bsdf_samples():
     np.testing.assert_array_equal(r.image, b.image)
 
 
+def test_alpha_auto_leaves_deep_renders_more_to_the_bsdf():
+    from tracer.guiding.odis.guide import ALPHA_DEEP, ALPHA_SHALLOW, INITIAL_DEPTH
+
+    g = make_guide("odis")
+    assert [g.alpha_for(d) for d in (1, INITIAL_DEPTH, INITIAL_DEPTH + 1, -1)] == [ALPHA_SHALLOW] * 2 + [ALPHA_DEEP] * 2
+    assert make_guide("odis", alpha=0.3).alpha_for(-1) == 0.3
+
+
 def test_settings_are_checked():
     from tracer.errors import SettingsError
 
-    for bad in ({"k": 4}, {"k": 0}, {"stride": 0}, {"alpha": 1.5}, {"initial": 0}, {"weights": ""}):
+    for bad in ({"k": 4}, {"k": 0}, {"stride": 0}, {"alpha": 1.5}, {"alpha": "deep"}, {"initial": 0}, {"weights": ""},
+                {"reuse": 2}):
         with pytest.raises(SettingsError):
             make_guide("odis", **bad)
 

@@ -71,7 +71,7 @@ from ...splitting import WeightWindow, observe_outgoing, outgoing
 from ..base import Guide, _float, _int
 from ..directional import build_tables
 from .photons import env_aim, trace_photons
-from .reconstruct import RECONSTRUCTORS, make_reconstructor
+from .reconstruct import RECONSTRUCTORS, Gaussian, make_reconstructor
 from .spatial import HierarchicalGrid
 from ..contract import empty_state
 from ..mixing import VarianceMixing
@@ -417,7 +417,8 @@ class PhotonGuide(HistogramGuide):
     # why each default: docs/guiding.md, "Defaults and where they were measured"
     # aim_env: environment photons start only where camera paths escaped (photons.EnvAim)
     DEFAULTS = dict(COMMON, split_c=4000.0, sigma=1.0, photons_per_pixel=2.0, light_guiding=0.0, split=2.0, window=3.0,
-                    window_low=0.05, aim_env=1)
+                    window_low=0.05, aim_env=1, reference_photons=0.0, reference_sigma=0.0)
+    REFERENCE_ITERATION = 1 << 20  # the photon keys' iteration of the reference maps (distinct from training)
     ESCAPES_PER_WAVE = 16384  # camera records a wave tests for escapes, at most
     ESCAPES_MAX = 200000  # escaped rays kept
 
@@ -426,6 +427,8 @@ class PhotonGuide(HistogramGuide):
         self.photons_per_pixel = _float("photons_per_pixel", self.settings["photons_per_pixel"], 0.0, 1e6)
         self.light_guiding = _float("light_guiding", self.settings["light_guiding"], 0.0, 0.95)
         self.aim_env = bool(_int("aim_env", self.settings["aim_env"], 0))
+        self.reference_photons = _float("reference_photons", self.settings["reference_photons"], 0.0, 1e6)
+        self.reference_sigma = _float("reference_sigma", self.settings["reference_sigma"], 0.0, 64.0)
 
     def prepare(self, scene, ctx):
         super().prepare(scene, ctx)
@@ -497,6 +500,36 @@ class PhotonGuide(HistogramGuide):
 
     def _importance_maps_wanted(self):
         return self.light_guiding > 0.0
+
+    def finish_training(self):
+        """As HistogramGuide's; then, with `reference_photons` > 0 (a diagnostic), the maps are
+        replaced by reference maps."""
+        off = super().finish_training()
+        if not off and self.reference_photons > 0.0 and self.grid is not None:
+            self._reference_maps()
+        return off
+
+    def _reference_maps(self):
+        """Every voxel's map rebuilt from `reference_photons` x pixels fresh photons alone (the
+        voxels, mixing weights and weight window stay those the training learned), filtered by a
+        Gaussian of `reference_sigma` bins (0: none). The render then shows what near-converged
+        maps would give, against the reconstructed ones (docs/photon_cnn.md). Voxels that the
+        reference photons miss keep their trained map (stats: reference_voxels_missed)."""
+        t0 = time.perf_counter()
+        g = self.grid
+        g.power[:] = 0.0
+        g.count[:] = 0.0
+        n = int(round(self.reference_photons * self.ctx.n_pixels))
+        trace_photons(self.ctx, g.lookup_state(), g.data_slot[: g.n_nodes], n, self.REFERENCE_ITERATION,
+                      lambda node, b, v, x, nn: g.accumulate(node, b, v), first_hit=self.records_direct(self.ctx))
+        used = g.slots_in_use()
+        slots, maps = self._normalised_maps(g.power)
+        if maps is not None:
+            g.set_maps(slots, build_tables(Gaussian(self.reference_sigma).reconstruct(maps, None, None)))
+        self._state = g.state()
+        self.info.update(reference_photons=n, reference_voxels_missed=int(used.size - slots.size),
+                         reference_seconds=round(time.perf_counter() - t0, 3))
+        self.time_learning += time.perf_counter() - t0
 
     def _observe_data(self, rec):
         if self.light_guiding > 0.0:

@@ -39,6 +39,7 @@ from ..contract import empty_state
 
 N_THETA = N_PHI = 32
 INITIAL_DEPTH = 3  # direct plus one-bounce indirect light at the first hit (weights trained so)
+ALPHA_SHALLOW, ALPHA_DEEP = 0.5, 0.7  # alpha auto (OdisGuide.alpha_for); why: docs/odis.md
 MAPS = ("network", "reference")
 CENTRE_CHUNK = 4096  # centres gathered and inferred at a time
 SMALL_K, LARGE_K = 11, 21  # the gather window (section 4.3): the larger one below 8 initial spp
@@ -248,8 +249,8 @@ class OdisGuide(Guide):
     # (2380-2570 beyond bsdf's), and 250 MB fixed (torch, the network)
     pixel_bytes = 3300
     fixed_bytes = 384 << 20
-    DEFAULTS = {"initial": 1, "k": "auto", "stride": 8, "alpha": 0.5, "weights": "odis", "batch": 128,
-                "maps": "network", "reference_per_bin": 16}
+    DEFAULTS = {"initial": 1, "k": "auto", "stride": 8, "alpha": "auto", "weights": "odis", "batch": 128,
+                "maps": "network", "reference_per_bin": 16, "reuse": 1}
 
     def __init__(self, **settings):
         s = dict(self.DEFAULTS, **settings)
@@ -261,7 +262,8 @@ class OdisGuide(Guide):
             if self.k % 2 == 0:
                 raise SettingsError(f"guide setting k must be odd, got {self.k}")
         self.stride = _int("stride", s["stride"], 1)
-        self.alpha = _float("alpha", s["alpha"], 1e-3, 1.0)  # > 0: the BSDF covers what the map cuts
+        # > 0: the BSDF covers what the map cuts; auto: ALPHA_SHALLOW or ALPHA_DEEP (alpha_for)
+        self.alpha = None if s["alpha"] == "auto" else _float("alpha", s["alpha"], 1e-3, 1.0)
         if not isinstance(s["weights"], str) or not s["weights"]:
             raise SettingsError(f"guide setting weights must be the name of shipped weights, got {s['weights']!r}")
         self.weights = s["weights"]
@@ -270,6 +272,9 @@ class OdisGuide(Guide):
             raise unknown_name("guide setting maps", s["maps"], MAPS)
         self.maps = s["maps"]
         self.reference_per_bin = _int("reference_per_bin", s["reference_per_bin"], 1)
+        if s["reuse"] not in (0, 1) or isinstance(s["reuse"], bool):
+            raise SettingsError(f"guide setting reuse must be 0 or 1, got {s['reuse']!r}")
+        self.reuse = bool(s["reuse"])
         self.settings = s
         self.model = None
         self._state = empty_state(N_THETA, N_PHI)
@@ -311,7 +316,7 @@ class OdisGuide(Guide):
         slot = np.zeros(n_pixels, np.int32) if t.usable[0] else np.full(n_pixels, -1, np.int32)
         return empty_state(m.shape[0], m.shape[1])._replace(
             rowcum=t.rowcum, dens=t.dens, wsum=t.wsum, pscale=t.pscale, pixel_slot=slot,
-            pixel_alpha=np.full(n_pixels, self.alpha))
+            pixel_alpha=np.full(n_pixels, ALPHA_SHALLOW if self.alpha is None else self.alpha))
 
     def _load(self):
         if self.model is None:
@@ -325,6 +330,21 @@ class OdisGuide(Guide):
         data config; 0: the render's own)."""
         self._load()
         return int(self.manifest.get("data", {}).get("config", {}).get("initial_depth", INITIAL_DEPTH))
+
+    def alpha_for(self, max_depth):
+        """The probability of BSDF sampling at the first bounce of a render of `max_depth`: the
+        setting, or with `auto` ALPHA_SHALLOW up to the network's INITIAL_DEPTH (its maps hold all
+        the light there is) and ALPHA_DEEP beyond it (the light of later bounces, which the
+        network never saw, is left more to the BSDF)."""
+        if self.alpha is not None:
+            return self.alpha
+        return ALPHA_SHALLOW if 0 < max_depth <= INITIAL_DEPTH else ALPHA_DEEP
+
+    def reuses(self, session):
+        """Whether the initial pass renders into the image (`reuse`, with the path tracer's own
+        final film): it then traces the render's own paths, to the render's depth, and the maps
+        are reconstructed from all the light those paths bring back along their first bounce."""
+        return self.reuse and session.integrator.film_kind == "final"  # the path tracer's film (not gpt's)
 
     def window_size(self):
         """The gather window k: the setting, or by the initial spp (section 4.3)."""
@@ -340,15 +360,21 @@ class OdisGuide(Guide):
             reason = "no samples left for an initial pass"
         else:
             session.phase("initial")
-            film = session.new_film("discard")
             total = ctx.n_pixels * n0
             size = session.buf.size
             self._waves = [min(size, total - g0) for g0 in range(0, total, size)]
             saved = self._render_depth = ctx.max_depth
-            depth = self.initial_depth()
-            ctx.max_depth = saved if depth <= 0 else depth if saved < 0 else min(saved, depth)
+            reuse = self.reuses(session)
+            if reuse:  # the render's own paths: their samples are the image's
+                film = session.final
+                session.films.append((film, "final"))
+            else:
+                film = session.new_film("discard")
+                depth = self.initial_depth()
+                ctx.max_depth = saved if depth <= 0 else depth if saved < 0 else min(saved, depth)
+            self._stats["initial_reused"] = reuse
             try:
-                session.run_pass(film, n0, "discard", learn=True)  # observe, then update builds the maps
+                session.run_pass(film, n0, "initial", learn=True)  # observe, then update builds the maps
             finally:
                 ctx.max_depth = saved
             reason = self._stats.get("fallback")
@@ -384,7 +410,7 @@ class OdisGuide(Guide):
         slot = np.where(usable, np.arange(w * h), -1).astype(np.int32)
         self._state = empty_state(N_THETA, N_PHI)._replace(
             rowcum=tables.rowcum, dens=tables.dens, wsum=tables.wsum, pscale=tables.pscale, pixel_slot=slot,
-            pixel_alpha=np.full(w * h, self.alpha))
+            pixel_alpha=np.full(w * h, self.alpha_for(self._render_depth)))
         self.peak_memory = self.memory_bytes()
         self._stats.update(pixels_guided=int(usable.sum()), pixels=w * h)
         self.time_learning += _time.perf_counter() - t0 - (self.time_inference - inf0)
