@@ -2,11 +2,14 @@
 
 The schedule of a render:
 
-1. Initial pass (`initial` spp, plain camera paths with max_depth 3, so that what comes back along
-   a first-bounce direction is direct plus one-bounce indirect light; the weights' manifest may
-   ask for another depth, what their training data was rendered with). Each first hit's sampled
-   direction, that radiance and both hits' depth and normal are kept (odis_input.initial_samples);
-   its film is of kind "discard": its samples never enter the image (section 3.3).
+1. Initial pass (`initial` spp of plain BSDF-sampled camera paths). Each first hit's sampled
+   direction, the radiance that came back along it and both hits' depth and normal are kept
+   (odis_input.initial_samples). With `reuse` (the default, path tracer only) the pass renders
+   the image's first spp, at the render's depth, into the final film. Otherwise (and under gpt)
+   it is the paper's (section 3.3): max_depth 3, so that what comes back along a first-bounce
+   direction is direct plus one-bounce indirect light (the weights' manifest may ask for another
+   depth, what their training data was rendered with), into a film of kind "discard" whose
+   samples never enter the image.
 2. Maps: at every `stride`-th pixel in x and y (the centres), the samples of the k x k pixels
    around it are binned into its 32 x 32 world-space sphere grid (odis_input.gather), and the
    network (odis_net, shipped weights) reconstructs the map of every bin, in one batched torch
@@ -15,8 +18,9 @@ The schedule of a render:
    first-hit normal, quantised straight into sampling tables (the `directional` layout, one
    fused kernel).
 3. Final passes: at the first bounce, one-sample MIS between the pixel's map (probability
-   1 - alpha) and the BSDF (alpha): the integrator's per-pixel maps (GuideState.pixel_slot), so the
-   estimate stays unbiased wherever the map is wrong. Later bounces sample the BSDF alone.
+   1 - alpha) and the BSDF (alpha; `auto`: 0.5 up to max_depth 3, 0.7 beyond, alpha_for): the
+   integrator's per-pixel maps (GuideState.pixel_slot), so the estimate stays unbiased wherever
+   the map is wrong. Later bounces sample the BSDF alone.
 
 A pixel with no initial sample of its own (its camera ray escaped, or met a delta BSDF or an
 emitter that ended the path) or whose map is zero samples the BSDF alone. If no initial sample
