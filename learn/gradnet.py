@@ -26,6 +26,7 @@ def main(argv=None):
     d.add_argument("--patch", type=int, default=None, help="patch side in pixels")
     d.add_argument("--patches", type=int, default=None, help="patches per scene")
     d.add_argument("--reference-spp", type=int, default=None, help="path-traced reference spp (0: none)")
+    d.add_argument("--spp", default=None, help="comma-separated spp, one drawn per scene (default 16,32,64,128,256)")
     t = sub.add_parser("train", help="train (resumes from the run's checkpoint)")
     add_train_args(t, DATA, os.path.join(RUNS, "w8"), width=8, epochs=35, patience=8, batch=8, lr=1e-3,
                    val_scenes=None)
@@ -43,8 +44,11 @@ def main(argv=None):
     if a.cmd == "data":
         from .gradnet_data import make_shard
 
+        spp = None if a.spp is None else [int(v) for v in a.spp.split(",") if v.strip()]
+        if spp is not None and (not spp or min(spp) < 1):
+            p.error(f"--spp wants positive integers, got {a.spp!r}")
         cfg = {k: v for k, v in (("width", a.size), ("height", a.size), ("patch", a.patch), ("patches", a.patches),
-                                 ("reference_spp", a.reference_spp)) if v is not None}
+                                 ("reference_spp", a.reference_spp), ("spp", spp)) if v is not None}
         return data_command(make_shard, a, cfg)
     from . import gradnet_train
 

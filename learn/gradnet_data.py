@@ -1,7 +1,8 @@
 """Training data for GradNet: gradient-domain renders of procedural scenes, as patches.
 
 For scene `seed` (learn.scenes, any material): one `--integrator gpt` render (hybrid shift, no
-reconstruction) at an spp drawn from SPP, whose buffers give, per pixel:
+reconstruction) at an spp drawn from the config's `spp` (default SPP; `data --spp`), whose buffers
+give, per pixel:
 
     indirect     the base image less its direct light (what the gradients describe: tracer's
                  gpt reconstructs the indirect light and adds the direct buffer back)
@@ -24,8 +25,8 @@ import tempfile
 
 import numpy as np
 
-DEFAULTS = {"width": 128, "height": 128, "patch": 64, "patches": 8, "reference_spp": 0}
 SPP = (16, 32, 64, 128, 256)
+DEFAULTS = {"width": 128, "height": 128, "patch": 64, "patches": 8, "reference_spp": 0, "spp": list(SPP)}
 CHANNELS = ("indirect", "dx", "dy", "direct")
 
 
@@ -47,7 +48,7 @@ def shard_arrays(scene, seed, c):
     import tracer
 
     rng = np.random.default_rng([int(seed), 0x6D4E])
-    spp = int(rng.choice(SPP))
+    spp = int(rng.choice(c.get("spp", SPP)))
     r = tracer.render(scene, spp=spp, seed=int(seed), integrator="gpt", recon="none")
     full = patch_stack(r.buffers)
     ref = None

@@ -47,6 +47,9 @@ def test_a_tiny_shard(tmp_path):
     assert m + int(a["dropped"]) == 5 and a["ref"].shape == (m, 3, 8, 8)
     assert int(a["spp"]) in gradnet_data.SPP
     assert np.isfinite(a["x"]).all() and (a["x"][:, 12:19] >= 0).all() and (a["x"][:, 12:19] <= 1).all()
+    # the spp comes from the config's set (data --spp), and the shard's own count says so
+    for s in (0, 1, 2):
+        assert int(gradnet_data.shard_arrays(scene, s, dict(cfg, spp=[2, 6]))["spp"]) in (2, 6)
     # every patch and its reference are cut at the same place of the two renders
     r = tracer.render(scene, spp=int(a["spp"]), seed=3, integrator="gpt", recon="none")
     full = gradnet_data.patch_stack(r.buffers)
