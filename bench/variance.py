@@ -8,9 +8,9 @@
 Per scene, each guide is trained once (`--train-spp`, seed 99), then frozen
 (tracer.guiding.FrozenGuide) and rendered `--seeds` times at `--spp`; `bsdf` is rendered the same
 way (the first method whose guide is bsdf is the baseline; a method may name its integrator
-after a slash, e.g. `photon/path:nee=0`). The figure is the relative variance of one sample, averaged over pixels:
-mean(var_of_mean x spp / (R^2 + 0.01)), R the scene's reference (box-downsampled by `--scale`),
-i.e. the relMSE one sample would have; the lower, the better the learned sampling. It isolates
+after a slash, e.g. `photon/path:nee=0`). The figure is the relative variance of one sample,
+averaged over pixels: mean(var_of_mean x spp / (R^2 + 0.01)), R the scene's reference
+(box-downsampled by `--scale`), i.e. the relMSE one sample would have; the lower, the better the learned sampling. It isolates
 the maps from learning cost and scheduling, which bench.convergence measures.
 
 Per method the table gives the mean of that figure over seeds, the standard error of that mean

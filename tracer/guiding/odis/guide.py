@@ -320,7 +320,7 @@ class OdisGuide(Guide):
         slot = np.zeros(n_pixels, np.int32) if t.usable[0] else np.full(n_pixels, -1, np.int32)
         return empty_state(m.shape[0], m.shape[1])._replace(
             rowcum=t.rowcum, dens=t.dens, wsum=t.wsum, pscale=t.pscale, pixel_slot=slot,
-            pixel_alpha=np.full(n_pixels, ALPHA_SHALLOW if self.alpha is None else self.alpha))
+            pixel_alpha=np.full(n_pixels, self.alpha_for(INITIAL_DEPTH)))
 
     def _load(self):
         if self.model is None:
