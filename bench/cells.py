@@ -27,7 +27,8 @@ def run_cells(prog, argv, a, run_cell, describe, summary):
     scenes = {}
     for name in a.scenes.split(","):
         obj = scene_path(name, a.scene_dir)
-        scenes[name] = (tracer.load_scene(obj), reference_for(obj)[0])
+        ref = reference_for(obj)[0]  # rendered at the reference's resolution (a Mitsuba scene's film may differ)
+        scenes[name] = (tracer.load_scene(obj, width=ref.shape[1], height=ref.shape[0]), ref)
     for spp in (int(s) for s in a.spp.split(",")):
         for name, (scene, ref) in scenes.items():
             for seed in range(a.seeds):

@@ -33,7 +33,8 @@ from .cells import run_cells
 from .reference import ROOT
 
 RECONS = {"gpt-l1": ("l1", None), "gpt-l2": ("l2", None), "gpt-gradnet": ("gradnet", {"correction": 1}),
-          "gpt-gradnet-raw": ("gradnet", {"correction": 0}), "gpt-base": ("none", None)}
+          "gpt-gradnet-raw": ("gradnet", {"correction": 0}),
+          "gpt-gradnet-v2": ("gradnet", {"correction": 1, "weights": "gradnet_v2"}), "gpt-base": ("none", None)}
 METHODS = tuple(RECONS) + ("bsdf",)
 ALPHA = 0.2
 
@@ -45,7 +46,7 @@ def run_cell(scene, seed, spp, ref, weights="gradnet"):
     out = []
     for method, (recon, opts) in RECONS.items():
         if opts is not None:
-            opts = dict(opts, weights=weights)
+            opts = dict({"weights": weights}, **opts)  # (a method that names its weights keeps them)
         image, secs = gradient.reconstruct_buffers(g.buffers, recon, ALPHA, opts)
         out.append({"method": method, "seed": seed, "spp": spp, "time_total": t_render + secs, "solve_s": secs,
                     "nonfinite_samples": g.stats["nonfinite_samples"], "finite": bool(np.isfinite(image).all()),
@@ -99,13 +100,13 @@ def summary(records, meta):
                 lines.append(f"| {spp} | {m} | {_median(rs, m, spp, 'time_total'):.2f} | {_median(rs, m, spp, 'solve_s'):.3f} "
                              f"| {e:.4g} | {ratio(l1)} | {ratio(bsdf)} | {_median(rs, m, spp, '1-SSIM'):.4f} |")
         lines += ["", "Equal time (relMSE interpolated at gpt-l1's times; bsdf extrapolated as 1 / time):", "",
-                  "| time s | " + " | ".join(f"{m} /l1 | {m} /bsdf" for m in ("gpt-gradnet", "gpt-l2", "gpt-base")) + " |",
-                  "|---" * 7 + "|"]
+                  "| time s | " + " | ".join(f"{m} /l1 | {m} /bsdf" for m in ("gpt-gradnet", "gpt-gradnet-v2", "gpt-l2", "gpt-base")) + " |",
+                  "|---" * 9 + "|"]
         for spp in spps:
             t = _median(rs, "gpt-l1", spp, "time_total")
             l1, bsdf = equal_time(rs, "gpt-l1", t), equal_time(rs, "bsdf", t)
             cells = []
-            for m in ("gpt-gradnet", "gpt-l2", "gpt-base"):
+            for m in ("gpt-gradnet", "gpt-gradnet-v2", "gpt-l2", "gpt-base"):
                 e = equal_time(rs, m, t)
                 cells += [f"{e / l1:.2f}", f"{e / bsdf:.2f}"]
             lines.append(f"| {t:.1f} | " + " | ".join(c.replace("nan", "-") for c in cells) + " |")

@@ -26,15 +26,18 @@ def main(argv=None):
     d.add_argument("--patch", type=int, default=None, help="patch side in pixels")
     d.add_argument("--patches", type=int, default=None, help="patches per scene")
     d.add_argument("--reference-spp", type=int, default=None, help="path-traced reference spp (0: none)")
+    d.add_argument("--box", type=float, default=None, help="share of the scenes that are Cornell-like boxes (default 0)")
     d.add_argument("--spp", default=None, help="comma-separated spp, one drawn per scene (default 16,32,64,128,256)")
     t = sub.add_parser("train", help="train (resumes from the run's checkpoint)")
     add_train_args(t, DATA, os.path.join(RUNS, "w8"), width=8, epochs=35, patience=8, batch=8, lr=1e-3,
                    val_scenes=None)
     t.add_argument("--blocks", type=int, default=2, help="residual blocks at 1/8 resolution")
-    t.add_argument("--paper-layout", action="store_true",
-                   help="the paper's decoder (its last transposed convolution gives the image) instead of a last "
-                        "full-resolution layer that sees the inputs and corrects the base")
+    t.add_argument("--layout", choices=("v2", "v2-l2", "v1", "paper"), default="v2",
+                   help="v2: two full-resolution layers correct a shortened L1 solve, with the noise inputs "
+                        "(default); v2-l2: the same correcting the L2 solution; "
+                        "v1: one full-resolution layer corrects the base; paper: the paper's decoder")
     t.add_argument("--alpha", type=float, default=1.0, help="weight of the data term (eq. 7)")
+    t.add_argument("--lambda-max", type=float, default=2.0, help="the cap of eq. 14's first-order weight (the paper's 2)")
     t.add_argument("--minutes", type=float, default=None, help="stop after this many minutes (resume later)")
     e = sub.add_parser("export", help="export a run's best weights into tracer/weights")
     e.add_argument("--run", default=os.path.join(RUNS, "w8"))
@@ -48,7 +51,7 @@ def main(argv=None):
         if spp is not None and (not spp or min(spp) < 1):
             p.error(f"--spp wants positive integers, got {a.spp!r}")
         cfg = {k: v for k, v in (("width", a.size), ("height", a.size), ("patch", a.patch), ("patches", a.patches),
-                                 ("reference_spp", a.reference_spp), ("spp", spp)) if v is not None}
+                                 ("reference_spp", a.reference_spp), ("spp", spp), ("box", a.box)) if v is not None}
         return data_command(make_shard, a, cfg)
     from . import gradnet_train
 

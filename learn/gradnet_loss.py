@@ -71,6 +71,7 @@ def total_loss(image, base, gx, gy, features, G, alpha=1.0, lam=0.0):
     return out
 
 
-def lambda_schedule(epoch):
-    """Eq. 14: 0 for the first 5 epochs, then 0.1 x 1.1^(epoch - 5), at most 2 (epochs count from 1)."""
-    return 0.0 if epoch <= 5 else min(0.1 * 1.1 ** (epoch - 5), 2.0)
+def lambda_schedule(epoch, top=2.0):
+    """Eq. 14: 0 for the first 5 epochs, then 0.1 x 1.1^(epoch - 5), at most `top` (the paper's 2;
+    epochs count from 1)."""
+    return 0.0 if epoch <= 5 else min(0.1 * 1.1 ** (epoch - 5), float(top))

@@ -1,7 +1,8 @@
 """Training and export of GradNet (tracer.gradient.gradnet), without ground truth.
 
 One example is one colour channel of a patch (learn.gradnet_data): the network sees the compressed
-indirect light and the 7 features, and the compressed dx, dy; its loss is eq. 7
+indirect light and the 7 features, and the compressed dx, dy (and, in the default layout `v2`,
+the L2 solution of the patch and the standard errors of base and gradients: GradNet.v2); its loss is eq. 7
 (learn.gradnet_loss.total_loss: gradient L1 + alpha data L1 + lambda first-order term, lambda by
 eq. 14's schedule), the G-branch's is eq. 11 with the base image. Both train in every step from
 one backward pass of their sum: the G-branch's parameters get gradients from eq. 11 only (G enters
@@ -31,7 +32,7 @@ from tracer import metrics
 from tracer.gradient import gradnet, poisson
 from tracer.gradient.gradnet import GradNet, expand, mu_law
 
-from .gradnet_data import DEFAULTS as DATA_DEFAULTS
+from .gradnet_data import DEFAULTS as DATA_DEFAULTS, N_CHANNELS
 from .gradnet_loss import first_order_loss, g_loss, grad_loss, data_loss, lambda_schedule, total_loss
 from .shards import list_shards, shard_config
 from .photon_train import (_save, _write_json, best_model, end_epoch, epochs_left, open_run, optimiser_step,
@@ -40,15 +41,41 @@ from .photon_train import (_save, _write_json, best_model, end_epoch, epochs_lef
 BETAS = (0.5, 0.999)
 LR_DECAY, LR_EVERY = 0.95, 2
 SOLVE_ALPHA = 0.2  # the screened Poisson baselines' weight on the base (tracer's default)
+LAYOUTS = ("v2", "v2-l2", "v1", "paper")  # GradNet.v2 (v2-l2: correcting L2); v1: full_res, one head layer, base
+# residual, no noise; the paper's
+
+
+def build(layout, width, blocks):
+    """The GradNet of a layout name (LAYOUTS)."""
+    if layout in ("v2", "v2-l2"):
+        return GradNet.v2(width, blocks, "l2" if layout == "v2-l2" else "l1")
+    if layout not in LAYOUTS:
+        raise ValueError(f"unknown layout {layout!r}; valid: " + ", ".join(LAYOUTS))
+    return GradNet(width, blocks, layout == "v1")
+
+
+def with_solutions(x):
+    """x (m, 28, P, P) with the solutions a residual network corrects (gradnet.solution) of each
+    patch's indirect light appended: L2 as channels 28:31, the shortened L1 as 31:34; float32."""
+    sol = np.empty((x.shape[0], 6) + x.shape[2:], np.float32)
+    for k in range(x.shape[0]):
+        p = x[k].astype(np.float64).transpose(1, 2, 0)
+        for j, residual in enumerate(("l2", "l1")):
+            sol[k, 3 * j:3 * j + 3] = gradnet.solution(residual, p[..., 0:3], p[..., 3:6], p[..., 6:9]).transpose(2, 0, 1)
+    return np.concatenate([x, sol], 1)
 
 
 def load_shards(paths):
-    """The shards concatenated: {x (m, 19, P, P) float32, ref (m, 3, P, P) or None (when any shard has
-    none), spp, scene per patch, dropped: patches dropped in all}."""
+    """The shards concatenated: {x (m, 34, P, P) float32 (the shards' 28 channels and the L2 and
+    L1 solutions: with_solutions), ref (m, 3, P, P) or None (when any shard has none), spp, scene per patch,
+    dropped: patches dropped in all}."""
     xs, refs, spp, scene, dropped = [], [], [], [], 0
     for p in paths:
         with np.load(p) as z:
             m = z["x"].shape[0]
+            if z["x"].shape[1] != N_CHANNELS:
+                raise SystemExit(f"{p}: {z['x'].shape[1]} channels, not {N_CHANNELS} (a shard of an older "
+                                 "format: make the data again with python -m learn.gradnet data)")
             xs.append(z["x"])
             refs.append(z["ref"] if "ref" in z.files else None)
             spp.append(np.full(m, int(z["spp"])))
@@ -56,24 +83,27 @@ def load_shards(paths):
             dropped += int(z["dropped"])
     cat = lambda v, shape: np.concatenate(v) if v else np.zeros(shape, np.float32)  # noqa: E731
     has_ref = bool(refs) and all(r is not None for r in refs)
-    return {"x": cat(xs, (0, 19, 1, 1)), "ref": cat(refs, (0, 3, 1, 1)) if has_ref else None,
+    return {"x": with_solutions(cat(xs, (0, N_CHANNELS, 1, 1))), "ref": cat(refs, (0, 3, 1, 1)) if has_ref else None,
             "spp": cat(spp, (0,)), "scene": cat(scene, (0,)), "dropped": dropped}
 
 
 def dihedral(x, k):
-    """Patches x (B, 19, P, P) torch under symmetry k of the square (bit 0: transpose, bit 1: mirror
+    """Patches x (B, 34, P, P) torch under symmetry k of the square (bit 0: transpose, bit 1: mirror
     left-right, bit 2: mirror top-bottom), with the gradients carried along: the forward
     differences of the transformed image are the transformed dx, dy (but in the last column of dx
-    and the last row of dy, which the losses leave out)."""
+    and the last row of dy, which the losses leave out); the gradients' variances (channels 22:25,
+    25:28) move as the gradients do, without the sign."""
     if k & 1:
         x = x.transpose(-1, -2)
-        x = torch.cat([x[:, 0:3], x[:, 6:9], x[:, 3:6], x[:, 9:]], 1)
+        x = torch.cat([x[:, 0:3], x[:, 6:9], x[:, 3:6], x[:, 9:22], x[:, 25:28], x[:, 22:25], x[:, 28:]], 1)
     if k & 2:
         x = x.flip(-1)
-        x = torch.cat([x[:, 0:3], -torch.roll(x[:, 3:6], -1, -1), x[:, 6:]], 1)
+        x = torch.cat([x[:, 0:3], -torch.roll(x[:, 3:6], -1, -1), x[:, 6:22], torch.roll(x[:, 22:25], -1, -1),
+                       x[:, 25:]], 1)
     if k & 4:
         x = x.flip(-2)
-        x = torch.cat([x[:, 0:6], -torch.roll(x[:, 6:9], -1, -2), x[:, 9:]], 1)
+        x = torch.cat([x[:, 0:6], -torch.roll(x[:, 6:9], -1, -2), x[:, 9:25], torch.roll(x[:, 25:28], -1, -2),
+                       x[:, 28:]], 1)
     return x
 
 
@@ -95,10 +125,11 @@ def reference_share(data):
     return k / len(paths)
 
 
-def batch(x, idx, aug=None):
-    """Tensors of the examples idx (patch idx // 3, colour idx % 3) of patches x (m, 19, P, P),
-    each under the symmetry aug[i] (dihedral; None: as stored): (data (B, 8, P, P), grads
-    (B, 2, P, P): the network's inputs; base, gx, gy (B, 1, P, P) linear; features (B, 7, P, P))."""
+def batch(x, idx, aug=None, model=None):
+    """Tensors of the examples idx (patch idx // 3, colour idx % 3) of patches x (m, 34, P, P),
+    each under the symmetry aug[i] (dihedral; None: as stored): (data (B, n_data, P, P), grads
+    (B, n_grad, P, P): the inputs of `model` (GradNet.forward; None: the paper's 8 and 2); base,
+    gx, gy (B, 1, P, P) linear; features (B, 7, P, P))."""
     p, c = idx // 3, idx % 3
     xb = torch.from_numpy(x[p])
     if aug is not None:
@@ -107,9 +138,13 @@ def batch(x, idx, aug=None):
     c = torch.from_numpy(c)
     base, gx, gy = xb[ar, c][:, None], xb[ar, 3 + c][:, None], xb[ar, 6 + c][:, None]
     feats = xb[:, 12:19]
-    data = torch.cat([mu_law(base), feats], 1)
-    grads = torch.cat([mu_law(gx), mu_law(gy)], 1)
-    return data, grads, base, gx, gy, feats
+    data, grads = [mu_law(base), feats], [mu_law(gx), mu_law(gy)]
+    if model is not None and model.residual != "base":
+        data.append(mu_law(xb[ar, (28 if model.residual == "l2" else 31) + c][:, None]))
+    if model is not None and model.noise:
+        data.append(gradnet.stderr(xb[ar, 19 + c][:, None]))
+        grads += [gradnet.stderr(xb[ar, 22 + c][:, None]), gradnet.stderr(xb[ar, 25 + c][:, None])]
+    return torch.cat(data, 1), torch.cat(grads, 1), base, gx, gy, feats
 
 
 def losses(model, data, grads, base, gx, gy, feats, alpha, lam):
@@ -149,7 +184,7 @@ def evaluate(model, va, alpha, lam_select, device, batch_size=48):
     with torch.no_grad():
         for i in range(0, n, batch_size):
             idx = np.arange(i, min(i + batch_size, n))
-            data, grads, base, gx, gy, feats = (t.to(device) for t in batch(va["x"], idx))
+            data, grads, base, gx, gy, feats = (t.to(device) for t in batch(va["x"], idx, model=model))
             G = model.derivatives(data, grads)
             out = expand(model(data, grads))
             w = len(idx)
@@ -173,9 +208,9 @@ def train(a):
     differing one is an error); each epoch's shuffle is seeded by (seed, epoch)."""
     if a.val_scenes is None:
         a.val_scenes = reference_share(a.data)
-    fixed = ("width", "blocks", "paper_layout", "batch", "lr", "seed", "alpha")
+    fixed = ("width", "blocks", "layout", "batch", "lr", "seed", "alpha", "lambda_max")
     device, ck, ck_path, cfg, tr_paths, va_paths = open_run(a, fixed, "python -m learn.gradnet data")
-    cfg.setdefault("select_lambda", lambda_schedule(a.epochs))  # kept when a resumed run changes --epochs
+    cfg.setdefault("select_lambda", lambda_schedule(a.epochs, a.lambda_max))  # kept when a resumed run changes --epochs
     tr = load_shards(tr_paths)
     va = load_shards(va_paths) if va_paths else None
     n = 3 * tr["x"].shape[0]
@@ -185,7 +220,7 @@ def train(a):
           f"validation: {0 if va is None else va['x'].shape[0]} patches from {len(va_paths)} scenes"
           f"{'' if va is None or va['ref'] is not None else ' (no references)'}; device {device}", flush=True)
     torch.manual_seed(a.seed)
-    model = GradNet(a.width, a.blocks, not a.paper_layout).to(device)
+    model = build(a.layout, a.width, a.blocks).to(device)
     opt, state = start_training(a, ck, ck_path, model, "loss")
     lam_select = cfg["select_lambda"]
     if va is not None and va["ref"] is not None and "baselines" not in state:
@@ -195,13 +230,13 @@ def train(a):
     for _ in epochs_left(a, state):
         t0 = time.perf_counter()
         set_lr(opt, a.lr, state["epoch"])
-        lam = lambda_schedule(state["epoch"] + 1)
+        lam = lambda_schedule(state["epoch"] + 1, a.lambda_max)
         rng = np.random.default_rng([a.seed, state["epoch"]])
         order = rng.permutation(n)
         turns = rng.integers(0, 8, n)
         steps, main_losses, g_losses = [], [], []
         for i in range(0, n - a.batch + 1, a.batch):
-            tensors = (t.to(device) for t in batch(tr["x"], order[i:i + a.batch], turns[i:i + a.batch]))
+            tensors = (t.to(device) for t in batch(tr["x"], order[i:i + a.batch], turns[i:i + a.batch], model))
             main, lg, _, _ = losses(model, *tensors, a.alpha, lam)
             main_losses.append(main.item())
             g_losses.append(lg.item())
@@ -222,7 +257,8 @@ def train(a):
 
 def check_input(h=20, w=28, seed=0):
     """A fixed input whose output the manifest stores: buffers of a smooth image with noise, sized
-    not a multiple of 8. Returns the keyword arguments of gradnet.reconstruct less the model."""
+    not a multiple of 8, and its variance buffers. Returns the keyword arguments of
+    gradnet.reconstruct less the model."""
     rng = np.random.default_rng(seed)
     y, x = np.mgrid[0:h, 0:w] / max(h, w)
     img = np.stack([np.sin(4 * x + 2 * y) + 1.2, 0.5 + x, 0.8 + y * y], axis=2)
@@ -232,7 +268,8 @@ def check_input(h=20, w=28, seed=0):
             "dx": (poisson.grad_x(img) + rng.normal(scale=0.05, size=img.shape)).astype(np.float32),
             "dy": (poisson.grad_y(img) + rng.normal(scale=0.05, size=img.shape)).astype(np.float32),
             "albedo": feats[..., 0:3].astype(np.float32), "normal": (2.0 * feats[..., 3:6] - 1.0).astype(np.float32),
-            "depth": feats[..., 6:7].astype(np.float32)}
+            "depth": feats[..., 6:7].astype(np.float32),
+            "variances": tuple((0.01 + 0.05 * rng.random(img.shape)).astype(np.float32) for _ in range(3))}
 
 
 def seconds_per_image(model, h, w, repeats=3):
@@ -263,22 +300,28 @@ def export(run, out=None, name=None):
     """The run's best weights into tracer/weights/<name>.pt (default gradnet) with the manifest
     <name>.json."""
     out = out or gradnet.WEIGHTS_DIR
-    model, st, cfg = best_model(run, lambda c: GradNet(c["width"], c["blocks"], not c["paper_layout"]))
+    model, st, cfg = best_model(run, lambda c: build(c["layout"], c["width"], c["blocks"]))
     names = cfg["train_scenes"] + cfg["val_scenes_files"]
     data_cfg = shard_config(os.path.join(cfg["data"], names[0]), DATA_DEFAULTS)
     val_cfg = shard_config(os.path.join(cfg["data"], cfg["val_scenes_files"][0]), DATA_DEFAULTS)
     ref_opt = f" --reference-spp {val_cfg['reference_spp']}" if val_cfg["reference_spp"] else ""
-    command = " && ".join(f"python -m learn.gradnet data --seeds {lo}:{hi}" + (ref_opt if val else "")
+    opts = "".join(f" --{flag} {value}" for flag, key, value in (
+        ("size", "width", data_cfg["width"]), ("patch", "patch", data_cfg["patch"]),
+        ("patches", "patches", data_cfg["patches"]), ("spp", "spp", ",".join(str(v) for v in data_cfg["spp"])),
+        ("box", "box", data_cfg.get("box", 0.0))) if data_cfg.get(key, DATA_DEFAULTS[key]) != DATA_DEFAULTS[key])
+    command = " && ".join(f"python -m learn.gradnet data --seeds {lo}:{hi}{opts}" + (ref_opt if val else "")
                           for lo, hi, val in (seed_runs(cfg["train_scenes"], False) + seed_runs(cfg["val_scenes_files"], True)))
     y = gradnet.reconstruct(model, **check_input())
-    flops = gradnet.count_flops(model, lambda: model(torch.zeros(1, 8, 64, 64), torch.zeros(1, 2, 64, 64)))
+    flops = gradnet.count_flops(model, lambda: model(torch.zeros(1, model.n_data, 64, 64),
+                                                     torch.zeros(1, model.n_grad, 64, 64)))
     name = name or gradnet.NAME
     manifest = {
-        "name": name, "model": {"width": cfg["width"], "blocks": cfg["blocks"], "full_res": not cfg["paper_layout"]},
+        "name": name, "model": model.config(),
         "data": {"command": command, "config": data_cfg, "train_scenes": len(cfg["train_scenes"]),
                  "validation_scenes": cfg["val_scenes_files"], "seed": cfg["seed"]},
         "train": {"command": cfg.get("command") or "python -m learn.gradnet train", "epochs": st["epoch"],
-                  "best_epoch": st.get("best_epoch"), "batch": cfg["batch"], "lr": cfg["lr"], "alpha": cfg["alpha"]},
+                  "best_epoch": st.get("best_epoch"), "batch": cfg["batch"], "lr": cfg["lr"], "alpha": cfg["alpha"],
+                  "lambda_max": cfg.get("lambda_max", 2.0)},
         "validation": st.get("best_eval"), "validation_baselines": st.get("baselines"),
         "parameters": gradnet.parameter_count(model) - gradnet.parameter_count(model.g_branch),
         "parameters_g_branch": gradnet.parameter_count(model.g_branch),

@@ -8,6 +8,9 @@ path (load it with tracer.load_scene). Everything random comes from numpy's Gene
   behind it; sometimes a window in one wall, with the sky (and sometimes a lamp) outside.
 - kind `corridor`: a long, narrow box, lights near one end or in a side niche.
 - kind `open`: a floor under the sky, with a lamp or without.
+- kind `box` (only when asked for, never drawn by the seed): a Cornell-like closed box, two
+  side walls of saturated colours, a ceiling lamp, one to three blocks and sometimes a sphere,
+  the camera near the front wall looking in; mostly Lambertian.
 Contents: random boxes (turned about the vertical), spheres, thin panels and occluders. Materials
 are Lambertian (most), glossy plastic, rough metal or glass. Area lights are quads, small or
 large, one-sided, facing into the scene. The sky is a constant environment.
@@ -21,7 +24,8 @@ import os
 
 import numpy as np
 
-KINDS = ("room", "corridor", "open")
+KINDS = ("room", "corridor", "open", "box")
+DRAWN = KINDS[:3]  # the kinds a seed picks by itself
 
 
 def _box_faces(inward):
@@ -274,18 +278,57 @@ def _open(b):
     return {"camera": cam}, env
 
 
+def _cornell_box(b):
+    r = b.rng
+    size = np.array([r.uniform(2, 4), r.uniform(2, 3.5), r.uniform(2, 4.5)])
+    lo, hi = np.zeros(3), size
+    grey = lambda: b.material("Kd {0:.3f} {0:.3f} {0:.3f}".format(r.uniform(0.4, 0.85)))  # noqa: E731
+
+    def saturated():
+        kd = r.uniform(0.03, 0.15, 3)
+        kd[int(r.integers(3))] = r.uniform(0.4, 0.8)
+        return b.material(f"Kd {kd[0]:.3f} {kd[1]:.3f} {kd[2]:.3f}")
+
+    x1, y1, z1 = hi
+    b.wall(saturated(), (0, 0, 0), (0, y1, 0), (0, 0, z1))  # x = 0, faces +x
+    b.wall(saturated(), (x1, 0, 0), (0, 0, z1), (0, y1, 0))  # x = x1, faces -x
+    b.wall(grey(), (0, 0, 0), (0, 0, z1), (x1, 0, 0))  # floor
+    b.wall(grey(), (0, y1, 0), (x1, 0, 0), (0, 0, z1))  # ceiling
+    b.wall(grey(), (0, 0, 0), (x1, 0, 0), (0, y1, 0))  # z = 0 (behind the camera), faces +z
+    b.wall(grey(), (0, 0, z1), (0, y1, 0), (x1, 0, 0))  # z = z1 (the back), faces -z
+    frac = r.uniform(0.1, 0.35)
+    w, d = frac * x1, frac * z1
+    x, z = r.uniform(0.3, 0.7) * (x1 - w), r.uniform(0.3, 0.7) * (z1 - d) + 0.2 * z1
+    power = r.uniform(3.0, 10.0) / frac ** 1.5
+    b.quad(b.lamp(power), (x, y1 - 1e-3 * y1, z), (w, 0, 0), (0, 0, d))
+    for _ in range(int(r.integers(1, 4))):
+        mat = b.surface(glass_ok=False) if r.random() < 0.2 else grey()
+        s = r.uniform(0.15, 0.35) * min(x1, z1)
+        cx, cz = r.uniform(0.2 * x1, 0.8 * x1), r.uniform(0.45 * z1, 0.85 * z1)
+        h = r.uniform(0.5, 2.2) * s
+        b.box(mat, (cx - s / 2, 0, cz - s / 2), (cx + s / 2, h, cz + s / 2), r.uniform(0, np.pi))
+    if r.random() < 0.3:
+        rad = r.uniform(0.08, 0.18) * min(x1, z1)
+        b.sphere(b.surface(glass_ok=False), (r.uniform(0.3, 0.7) * x1, rad, r.uniform(0.4, 0.8) * z1), rad)
+    o = np.array([x1 * r.uniform(0.4, 0.6), y1 * r.uniform(0.4, 0.6), z1 * r.uniform(0.02, 0.1)])
+    t = np.array([x1 * r.uniform(0.4, 0.6), y1 * r.uniform(0.35, 0.55), z1])
+    cam = {"origin": o.tolist(), "target": t.tolist(), "up": [0, 1, 0], "fov": float(r.uniform(45, 70))}
+    return {"camera": cam}, None
+
+
 def make_scene(seed, folder, width=64, height=64, kind=None, diffuse_only=False):
     """Write the procedural scene of `seed` into `folder`; returns the OBJ path. `kind` (one of
-    KINDS) forces the layout; by default the seed picks it (rooms 50%, corridors 25%, open 25%).
+    KINDS) forces the layout; by default the seed picks it (rooms 50%, corridors 25%, open 25%; `box`
+    only when asked for).
     `diffuse_only`: every surface Lambertian (the same layout and colours as without it)."""
     rng = np.random.default_rng([int(seed), 0x5CE4E])
-    pick = rng.choice(KINDS, p=[0.5, 0.25, 0.25])
+    pick = rng.choice(DRAWN, p=[0.5, 0.25, 0.25])
     kind = kind or pick
     if kind not in KINDS:
         raise ValueError(f"unknown scene kind {kind!r}; valid: " + ", ".join(KINDS))
     b = _Builder(rng)
     b.diffuse_only = bool(diffuse_only)
-    sidecar, env = {"room": _room, "corridor": _corridor, "open": _open}[kind](b)
+    sidecar, env = {"room": _room, "corridor": _corridor, "open": _open, "box": _cornell_box}[kind](b)
     sidecar["film"] = {"width": int(width), "height": int(height)}
     sidecar["render"] = {"spp": 4, "max_depth": 8, "rr_depth": 5, "seed": int(seed)}
     if env is not None:

@@ -207,6 +207,15 @@ class Session:
         if self.bar is not None:
             self.bar.update(n / self.ctx.n_pixels)
 
+    def final_film(self):
+        """The integrator's final film (self.final for the path tracer), registered in self.films
+        (once) under the integrator's film kind."""
+        it = self.integrator
+        film = it.final_film(self)
+        if not any(f is film for f, _ in self.films):
+            self.films.append((film, it.film_kind))
+        return film
+
     def final_passes(self, split=None, source=None):
         """Fill the rest of the budget with the integrator's final passes into its final film
         (self.final for the path tracer): each twice the last pass's spp (the first as many as the
@@ -215,9 +224,7 @@ class Session:
         pass cut at the deadline (run_pass). split: a splitting.SplitPlan; source: where the paths
         start (default: the camera; e.g. a guiding.pss.warp.WarpSource)."""
         it = self.integrator
-        film = it.final_film(self)
-        if not any(f is film for f, _ in self.films):
-            self.films.append((film, it.film_kind))
+        film = self.final_film()
         self.phase("final")
         passes = self.passes
         pass_spp = passes[-1]["spp"] if passes else 1

@@ -24,6 +24,8 @@ from tracer.errors import SettingsError
 from tracer.gradient import gradnet
 from tracer.testing.stats import assert_clean
 
+from .test_gradnet_net import _dense_l2
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENES = ("ajar", "caustic", "cornell", "glossy", "manylights", "spotlit", "window")
 
@@ -32,8 +34,13 @@ def _scene(name, w=32, h=32):
     return tracer.load_scene(os.path.join(ROOT, "scenes", name, f"{name}.obj"), width=w, height=h)
 
 
-def test_shipped_weights_reproduce_their_manifest():
-    model, manifest = gradnet.load()
+SHIPPED = ("gradnet", "gradnet_v2")
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_weights_reproduce_their_manifest(name):
+    model, manifest = gradnet.load(name)
+    assert manifest["model"] == model.config()
     y = gradnet.reconstruct(model, **check_input())
     np.testing.assert_allclose(y.sum(axis=(0, 1)), manifest["check"]["output_sum"], rtol=1e-4, atol=1e-3)
     np.testing.assert_allclose(y[10, :8], manifest["check"]["output_row"], rtol=1e-4, atol=1e-5)
@@ -42,16 +49,31 @@ def test_shipped_weights_reproduce_their_manifest():
 
 def _twin(model, b):
     """The reconstruction written out: per colour channel, numpy edge padding to multiples of 8,
-    the signed mu-law (mu 16), one forward call, the crop and the inverse mu-law."""
+    the signed mu-law (mu 16), one forward call, the crop and the inverse mu-law; a v2 network's
+    L2 solution (a dense solve of its normal equations, on the unpadded image; the shortened L1
+    solve, which has no closed form, is gradnet.solution's) and standard errors
+    (the square roots of the variance buffers) among the inputs, in GradNet.forward's order."""
     h, w = b["indirect"].shape[:2]
     ph, pw = -h % 8, -w % 8
     pad = lambda a: np.pad(np.asarray(a, np.float64), ((0, ph), (0, pw), (0, 0)), mode="edge")  # noqa: E731
     comp = lambda x: np.sign(x) * np.log1p(16.0 * np.abs(x)) / np.log(17.0)  # noqa: E731
     feats = np.concatenate([pad(b["albedo"]), (pad(b["normal"]) + 1.0) / 2.0, pad(b["depth"])], axis=2)
     out = np.zeros((h, w, 3))
+    if model.residual == "l1":  # a truncated IRLS (its three channels as one system) has no closed form
+        l1 = gradnet.solution("l1", *(np.asarray(b[k], np.float64) for k in ("indirect", "dx", "dy")))
     for c in range(3):
-        data = np.concatenate([comp(pad(b["indirect"])[..., c:c + 1]), feats], axis=2).transpose(2, 0, 1)
-        grads = np.stack([comp(pad(b["dx"])[..., c]), comp(pad(b["dy"])[..., c])])
+        data = [comp(pad(b["indirect"])[..., c:c + 1]), feats]
+        grads = [comp(pad(b["dx"])[..., c]), comp(pad(b["dy"])[..., c])]
+        ind, gx, gy = (np.asarray(b[k], np.float64)[..., c] for k in ("indirect", "dx", "dy"))
+        if model.residual == "l2":
+            data.append(comp(pad(_dense_l2(ind, gx, gy, gradnet.L2_ALPHA)[..., None])))
+        elif model.residual == "l1":
+            data.append(comp(pad(l1[..., c:c + 1])))
+        if model.noise:
+            data.append(comp(np.sqrt(pad(b["base_variance"])[..., c:c + 1])))
+            grads += [comp(np.sqrt(pad(b[k])[..., c])) for k in ("dx_variance", "dy_variance")]
+        data = np.concatenate(data, axis=2).transpose(2, 0, 1)
+        grads = np.stack(grads)
         with torch.no_grad():
             t = model(torch.tensor(data[None], dtype=torch.float32), torch.tensor(grads[None], dtype=torch.float32))
         t = t[0, 0, :h, :w].double().numpy()
@@ -59,16 +81,16 @@ def _twin(model, b):
     return out
 
 
-@pytest.mark.parametrize("correction", [0, 1])
-def test_render_is_the_network_on_its_own_buffers(correction):
+@pytest.mark.parametrize("name,correction", [("gradnet", 0), ("gradnet", 1), ("gradnet_v2", 1)])
+def test_render_is_the_network_on_its_own_buffers(name, correction):
     """A 29 x 21 render (not a multiple of 8): image = twin(buffers) (energy-corrected against the
     indirect buffer when asked) + direct."""
     scene = _scene("cornell", 29, 21)
     r = tracer.render(scene, spp=4, seed=2, integrator="gpt", recon="gradnet",
-                      recon_settings={"correction": correction})
+                      recon_settings={"correction": correction, "weights": name})
     assert_clean(r)
     b = r.buffers
-    rec = _twin(gradient.gradnet_model("gradnet"), b)
+    rec = _twin(gradient.gradnet_model(name), b)
     if correction:
         rec = gradnet.energy_correction(rec, b["indirect"])
     np.testing.assert_allclose(r.image, rec + b["direct"], rtol=2e-4, atol=2e-5)

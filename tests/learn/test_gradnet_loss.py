@@ -103,3 +103,10 @@ def test_terms_vanish_separately():
     assert float(data_loss(image, base)) == 0.0
     assert float(grad_loss(image, gx, gy)) < 1e-12
     assert float(first_order_loss(image, base, feats, G)) < 1e-12
+
+
+def test_lambda_schedule_cap():
+    """--lambda-max moves the cap, not the growth: 0.1 x 1.1^35 at epoch 40 under a cap of 20."""
+    assert lambda_schedule(40, top=20.0) == pytest.approx(0.1 * 1.1 ** 35)
+    assert lambda_schedule(100, top=20.0) == pytest.approx(20.0)
+    assert lambda_schedule(40) == pytest.approx(2.0)

@@ -33,8 +33,8 @@ def shards(tmp_path_factory):
 
 
 def _args(data, run, epochs):
-    return argparse.Namespace(data=data, run=run, width=2, blocks=1, paper_layout=False, epochs=epochs, patience=3, batch=4, lr=1e-3,
-                              alpha=1.0, val_scenes=0.5, max_steps=2, minutes=None, seed=0, device="cpu")
+    return argparse.Namespace(data=data, run=run, width=2, blocks=1, layout="v2", epochs=epochs, patience=3, batch=4, lr=1e-3,
+                              alpha=1.0, lambda_max=2.0, val_scenes=0.5, max_steps=2, minutes=None, seed=0, device="cpu")
 
 
 def test_validation_baselines_are_the_solves_of_the_patches(shards):
@@ -53,21 +53,28 @@ def test_augmentation_keeps_the_gradients_the_images(k):
     transformed image (a wrong sign, shift or swap fails), and features move with the image."""
     rng = np.random.default_rng(k)
     img = rng.random((1, 3, 8, 8))
-    x = np.zeros((1, 19, 8, 8))
+    x = np.zeros((1, 31, 8, 8))
     x[:, 0:3] = img
     x[:, 3:6, :, :-1] = img[..., 1:] - img[..., :-1]
     x[:, 6:9, :-1, :] = img[..., 1:, :] - img[..., :-1, :]
     x[:, 3:6, :, -1] = rng.random((1, 3, 8))  # a gradient to a pixel outside the patch
     x[:, 6:9, -1, :] = rng.random((1, 3, 8))
-    x[:, 9:] = rng.random((1, 10, 8, 8))
+    x[:, 9:22] = rng.random((1, 13, 8, 8))
+    # each gradient's variance: a function of the pair of pixels it joins (symmetric in them)
+    x[:, 22:25, :, :-1] = img[..., 1:] * img[..., :-1]
+    x[:, 25:28, :-1, :] = img[..., 1:, :] * img[..., :-1, :]
+    x[:, 28:] = rng.random((1, 3, 8, 8))
     y = gradnet_train.dihedral(torch.from_numpy(x), k).numpy()
     t = y[:, 0:3]
     np.testing.assert_allclose(y[:, 3:6, :, :-1], t[..., 1:] - t[..., :-1], atol=1e-12)
     np.testing.assert_allclose(y[:, 6:9, :-1, :], t[..., 1:, :] - t[..., :-1, :], atol=1e-12)
-    # the pixel at the image value's new place carries its own features
+    np.testing.assert_allclose(y[:, 22:25, :, :-1], t[..., 1:] * t[..., :-1], atol=1e-12)
+    np.testing.assert_allclose(y[:, 25:28, :-1, :], t[..., 1:, :] * t[..., :-1, :], atol=1e-12)
+    # the pixel at the image value's new place carries its own features, variance and L2 solution
     yy, xx = np.unravel_index(np.argmax(t[0, 0]), (8, 8))
     oy, ox = np.unravel_index(np.argmax(img[0, 0]), (8, 8))
-    np.testing.assert_array_equal(y[0, 9:, yy, xx], x[0, 9:, oy, ox])
+    np.testing.assert_array_equal(y[0, 9:22, yy, xx], x[0, 9:22, oy, ox])
+    np.testing.assert_array_equal(y[0, 28:, yy, xx], x[0, 28:, oy, ox])
     # the image itself goes where the symmetry sends it
     want = img.transpose(0, 1, 3, 2) if k & 1 else img
     want = want[..., ::-1] if k & 2 else want
@@ -94,7 +101,8 @@ def test_resume_export_and_render(shards, tmp_path, monkeypatch):
         gradnet_train.train(args)
     wdir = str(tmp_path / "weights")
     man = gradnet_train.export(resumed, wdir, name="tiny")
-    assert man["data"]["config"]["patch"] == TINY["patch"] and man["model"] == {"width": 2, "blocks": 1, "full_res": True}
+    assert man["data"]["config"]["patch"] == TINY["patch"] and man["model"] == {"width": 2, "blocks": 1, "full_res": True,
+                                                                            "residual": "l1", "noise": True, "head": 2}
     model, manifest = gradnet.load("tiny", folder=wdir)
     assert manifest["parameters"] + manifest["parameters_g_branch"] == gradnet.parameter_count(model)
     y = gradnet.reconstruct(model, **gradnet_train.check_input())

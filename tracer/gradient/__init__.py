@@ -112,7 +112,8 @@ def solve_time_estimate(recon, width, height, alpha, opts=None):
 
 def reconstruct_buffers(buffers, recon, alpha, opts=None):
     """(image (H,W,3) float64: the reconstruction of buffers["indirect"] from it and its gradients
-    buffers["dx"], ["dy"] (and, for gradnet, the features albedo, normal, depth) plus
+    buffers["dx"], ["dy"] (and, for gradnet, the features albedo, normal, depth, and the variance
+    buffers base_variance, dx_variance, dy_variance where the network reads them) plus
     buffers["direct"]; seconds the solve or the network's inference with its energy correction
     took). The buffers are those of a gpt render (solve's), so that one render can be
     reconstructed every way."""
@@ -126,8 +127,9 @@ def reconstruct_buffers(buffers, recon, alpha, opts=None):
         s = recon_settings(recon, opts)
         b = buffers
         torch.set_num_threads(numba.get_num_threads())  # the render's thread count (render(threads=...))
+        variances = tuple(b.get(k) for k in ("base_variance", "dx_variance", "dy_variance"))
         rec = gradnet.reconstruct(gradnet_model(s["weights"]), b["indirect"], b["dx"], b["dy"], b["albedo"],
-                                  b["normal"], b["depth"])
+                                  b["normal"], b["depth"], None if any(v is None for v in variances) else variances)
         if s["correction"]:
             rec = gradnet.energy_correction(rec, b["indirect"])
         image = rec.astype(np.float64)
@@ -152,10 +154,10 @@ def solve(films, recon, alpha, opts=None):
     top = float(finite.max()) if finite.size and finite.max() > 0 else 1.0
     features = dict(albedo=aovs["albedo"], normal=aovs["normal"],
                     depth=f32(np.clip(np.where(np.isfinite(depth), depth, top) / top, 0.0, 1.0)))
-    image, t_solve = reconstruct_buffers(dict(features, indirect=indirect, dx=dx, dy=dy, direct=films.direct.mean()),
-                                         recon, alpha, opts)
-    buffers = {"base": f32(films.base.mean()), "base_variance": f32(films.base.variance()),
-               "dx": f32(dx), "dx_variance": f32(films.dx.variance()), "dy": f32(dy),
-               "dy_variance": f32(films.dy.variance()), "direct": f32(films.direct.mean()),
-               "indirect": f32(indirect), **features}
+    variances = {"base_variance": f32(films.base.variance()), "dx_variance": f32(films.dx.variance()),
+                 "dy_variance": f32(films.dy.variance())}
+    image, t_solve = reconstruct_buffers(dict(features, **variances, indirect=indirect, dx=dx, dy=dy,
+                                              direct=films.direct.mean()), recon, alpha, opts)
+    buffers = {"base": f32(films.base.mean()), "dx": f32(dx), "dy": f32(dy), "direct": f32(films.direct.mean()),
+               "indirect": f32(indirect), **variances, **features}
     return image, buffers, t_solve

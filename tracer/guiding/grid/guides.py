@@ -474,11 +474,13 @@ class PhotonGuide(HistogramGuide):
     def _n_photons(self, iteration):
         return int(round(self.photons_per_pixel * self.ctx.n_pixels * self.spp_init * 2 ** iteration))
 
-    def _trace(self, iteration, sink, guided=False):
+    def _trace(self, iteration, sink, guided=False, n_photons=None):
+        """Trace `n_photons` (default: the iteration's count) photons into sink, counted in info."""
         g = self.grid
         imp = g.state(importance=True) if guided and self.light_guiding > 0.0 else None
+        n_photons = self._n_photons(iteration) if n_photons is None else int(n_photons)
         n, dep, rays, ne, nt, ni = trace_photons(
-            self.ctx, g.lookup_state(), g.data_slot[: g.n_nodes], self._n_photons(iteration), iteration, sink,
+            self.ctx, g.lookup_state(), g.data_slot[: g.n_nodes], n_photons, iteration, sink,
             first_hit=self.records_direct(self.ctx), imp=imp, p_imp=self.light_guiding, aim=self._aim())
         self.info["photons"] += n
         self.info["deposits"] += dep
@@ -520,8 +522,7 @@ class PhotonGuide(HistogramGuide):
         g.power[:] = 0.0
         g.count[:] = 0.0
         n = int(round(self.reference_photons * self.ctx.n_pixels))
-        trace_photons(self.ctx, g.lookup_state(), g.data_slot[: g.n_nodes], n, self.REFERENCE_ITERATION,
-                      lambda node, b, v, x, nn: g.accumulate(node, b, v), first_hit=self.records_direct(self.ctx))
+        self._trace(self.REFERENCE_ITERATION, lambda node, b, v, x, nn: g.accumulate(node, b, v), n_photons=n)
         used = g.slots_in_use()
         slots, maps = self._normalised_maps(g.power)
         if maps is not None:

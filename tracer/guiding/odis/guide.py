@@ -370,8 +370,7 @@ class OdisGuide(Guide):
             saved = self._render_depth = ctx.max_depth
             reuse = self.reuses(session)
             if reuse:  # the render's own paths: their samples are the image's
-                film = session.final
-                session.films.append((film, "final"))
+                film = session.final_film()
             else:
                 film = session.new_film("discard")
                 depth = self.initial_depth()
