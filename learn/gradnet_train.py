@@ -2,7 +2,8 @@
 
 One example is one colour channel of a patch (learn.gradnet_data): the network sees the compressed
 indirect light and the 7 features, and the compressed dx, dy (and, in the default layout `v2`,
-the L2 solution of the patch and the standard errors of base and gradients: GradNet.v2); its loss is eq. 7
+the shortened L1 solution of the patch, which it corrects, and the standard errors of base and
+gradients: GradNet.v2); its loss is eq. 7
 (learn.gradnet_loss.total_loss: gradient L1 + alpha data L1 + lambda first-order term, lambda by
 eq. 14's schedule), the G-branch's is eq. 11 with the base image. Both train in every step from
 one backward pass of their sum: the G-branch's parameters get gradients from eq. 11 only (G enters

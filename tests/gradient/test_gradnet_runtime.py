@@ -165,3 +165,15 @@ def test_bench_convergence_runs_gpt_gradnet():
         assert math.isfinite(recs[m]["metrics"]["relMSE"])
     assert recs["gpt-gradnet"]["metrics"]["relMSE"] != recs["gpt-gradnet-raw"]["metrics"]["relMSE"]
     assert convergence.GRADIENT_METHODS["gpt-gradnet-raw"]["integrator"] == "gpt:recon=gradnet,correction=0"
+
+
+def test_time_budget_with_gradnet_v2():
+    """A timed render reserves the reconstruction's time from an estimate made on synthetic buffers:
+    the v2 weights read the variance buffers, so synthetic buffers without them fail the render
+    before it starts (what this detects), and the estimate must be a positive, finite time."""
+    est = gradient.solve_time_estimate("gradnet", 256, 256, 0.2, {"weights": "gradnet_v2"})
+    assert math.isfinite(est) and est > 0
+    r = tracer.render(_scene("cornell", 16, 16), time=1.0, seed=0, integrator="gpt", recon="gradnet",
+                      recon_settings={"weights": "gradnet_v2"})
+    assert_clean(r)
+    assert np.isfinite(r.image).all()

@@ -76,29 +76,40 @@ def warm_up(ctx, shift, roughness):
         hybrid.warm_up(ctx, WaveBuffers(1), roughness)
 
 
+def _noisy_buffers(n):
+    """{indirect, dx, dy}: an n x n smooth RGB image with an edge, noise 0.3 on it and 0.05 on its
+    gradients (float64)."""
+    y, x = np.mgrid[0:n, 0:n] / float(n)
+    img = np.repeat((np.sin(5 * x + 3 * y) + 1.5 + (x > 0.5))[:, :, None], 3, axis=2)
+    rng = np.random.default_rng(0)
+    return {"indirect": img + rng.normal(scale=0.3, size=img.shape),
+            "dx": poisson.grad_x(img) + rng.normal(scale=0.05, size=img.shape),
+            "dy": poisson.grad_y(img) + rng.normal(scale=0.05, size=img.shape)}
+
+
 def solve_time_estimate(recon, width, height, alpha, opts=None):
     """Seconds a `recon` solve of a width x height RGB image will take: solves of noisy 64 x 64 and
     128 x 128 images (a smooth image, noise 0.3 on the base and 0.05 on the gradients) timed here,
     and a line through the two (a fixed cost per solve, the solvers' bounded iterations, and a cost
     per pixel; the DCTs' log N is left out). Scaling the 64 x 64 solve alone overestimated a
     256 x 192 L1 solve 2.5x and left 4% of a 10 s budget unused. For gradnet, its inference and
-    energy correction on a 128 x 128 image, scaled by the pixel count."""
+    energy correction (and the solve it corrects, for weights that correct one) on the noisy
+    128 x 128 image, with variance buffers, scaled by the pixel count."""
     if recon == "none":
         return 0.0
     if recon == "gradnet":
         s = recon_settings(recon, opts)
-        z = np.zeros((128, 128, 3), np.float32)
-        b = dict(indirect=z, dx=z, dy=z, direct=z, albedo=z, normal=z, depth=z[..., :1])
+        b = _noisy_buffers(128)
+        z = np.zeros_like(b["indirect"])
+        v = np.full_like(z, 0.01)
+        b.update(direct=z, albedo=z + 0.5, normal=z, depth=z[..., :1] + 0.5, base_variance=v, dx_variance=v,
+                 dy_variance=v)
         reconstruct_buffers(b, recon, alpha, s)
         return reconstruct_buffers(b, recon, alpha, s)[1] * (width * height) / (128.0 * 128.0)
     times = []
     for n in (64, 128):
-        y, x = np.mgrid[0:n, 0:n] / float(n)
-        img = np.repeat((np.sin(5 * x + 3 * y) + 1.5 + (x > 0.5))[:, :, None], 3, axis=2)
-        rng = np.random.default_rng(0)
-        b = img + rng.normal(scale=0.3, size=img.shape)
-        gx = poisson.grad_x(img) + rng.normal(scale=0.05, size=img.shape)
-        gy = poisson.grad_y(img) + rng.normal(scale=0.05, size=img.shape)
+        nb = _noisy_buffers(n)
+        b, gx, gy = nb["indirect"], nb["dx"], nb["dy"]
         if n == 64:
             poisson.reconstruct(recon, b, gx, gy, alpha)  # the first call pays for scipy's set-up
         t0 = _time.perf_counter()

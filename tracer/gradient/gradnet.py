@@ -11,10 +11,10 @@ with respect to the features that the first-order loss needs during training; in
 run it.
 
 Two options beyond the paper, both off in the layout the paper describes (`GradNet(...)`'s
-defaults) and both on in `GradNet.v2`: `residual="l2"` gives the network the L2 screened Poisson
-solution of the same buffers (exact, by the DCT, alpha L2_ALPHA) as an input of both the data
-branch and the last layers, and its output is a correction of that solution instead of the base
-image; `noise` gives it the standard error of each pixel's base and gradients (mu-law
+defaults) and both on in `GradNet.v2`: `residual="l1"` (v2's) or `"l2"` gives the network a
+screened Poisson solution of the same buffers (`solution`: the L1 one by a shortened IRLS, or the
+exact L2 one by the DCT; alpha L2_ALPHA) as an input of both the data branch and the last layers,
+and its output is a correction of that solution instead of the base image; `noise` gives it the standard error of each pixel's base and gradients (mu-law
 compressed: the square roots of the render's variance buffers), the data branch that of the base,
 the gradient branch those of dx and dy. `head` is the number of 3x3 convolutions at full
 resolution (1 or 2) that see the decoder's output with the inputs.
@@ -68,7 +68,7 @@ class _Residual(nn.Module):
 
 
 class GradNet(nn.Module):
-    """Two encoders (data: 1 + 7 channels, + 1 for the L2 solution, + 1 for the base's noise;
+    """Two encoders (data: 1 + 7 channels, + 1 for the solution corrected, + 1 for the base's noise;
     gradients: 2, + 2 for their noise), `blocks` residual blocks, a decoder with dual skip links,
     `head` full-resolution layers; `g_branch` the G-branch (see the module docstring). Width w:
     the first level's channels."""
@@ -120,8 +120,8 @@ class GradNet(nn.Module):
                 "noise": self.noise, "head": self.head}
 
     def forward(self, data, grads):
-        """data (B, n_data, H, W): compressed image, features, then (residual "l2") the compressed L2
-        solution and (noise) the base's compressed standard error; grads (B, n_grad, H, W):
+        """data (B, n_data, H, W): compressed image, features, then (residual "l1" or "l2") the
+        compressed solution and (noise) the base's compressed standard error; grads (B, n_grad, H, W):
         compressed dx, dy, then (noise) their compressed standard errors; H and W multiples of 8.
         Returns the compressed reconstruction (B, 1, H, W)."""
         ds, gs = [], []
@@ -192,7 +192,7 @@ def _chw(a):
 def inputs(indirect, dx, dy, albedo, normal, depth, variances=None, residual="base", noise=False):
     """(data (3, n_data, H, W), grads (3, n_grad, H, W)) float32 tensors, one example per colour
     channel, from (H, W, 3) buffers (depth (H, W, 1), in [0, 1]; normals in [-1, 1]); with
-    residual "l2" the L2 solution of the buffers joins data, with noise the standard errors from
+    residual "l1" or "l2" the solution of the buffers (`solution`) joins data, with noise the standard errors from
     `variances` (base, dx, dy variance buffers) join data and grads (GradNet.forward's order)."""
     feats = np.concatenate([albedo, (np.asarray(normal) + 1.0) * 0.5, depth], axis=2).transpose(2, 0, 1)
     feats = torch.from_numpy(np.ascontiguousarray(feats, np.float32))
