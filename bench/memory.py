@@ -25,7 +25,8 @@ from .reference import ROOT
 METHODS = {"bsdf": [], "grid": ["--guide", "grid"], "photon": ["--guide", "photon"], "pss": ["--guide", "pss"],
            "odis": ["--guide", "odis"], "gpt-l1": ["--integrator", "gpt", "--recon", "l1"],
            "gpt-l2": ["--integrator", "gpt", "--recon", "l2"],
-           "gpt-gradnet": ["--integrator", "gpt", "--recon", "gradnet"]}
+           "gpt-gradnet": ["--integrator", "gpt", "--recon", "gradnet"],
+           "gpt-gradnet-v2": ["--integrator", "gpt", "--recon", "gradnet", "--recon-opt", "weights=gradnet_v2"]}
 
 
 def peak_rss(args):
@@ -45,7 +46,7 @@ def estimated_per_pixel(method):
     from tracer.guiding import make_guide
 
     if method.startswith("gpt-"):
-        return memory.GPT_PIXEL_BYTES[method[4:]]
+        return memory.GPT_PIXEL_BYTES[method[4:].split("-")[0]]  # (gpt-gradnet-v2: weights of gradnet)
     g = make_guide(method)
     return memory.PATH_PIXEL_BYTES + (g.pixel_bytes if g is not None else 0)
 

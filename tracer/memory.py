@@ -23,8 +23,8 @@ import os
 from .errors import SettingsError
 
 PATH_PIXEL_BYTES = 280  # measured 219 B/px (bsdf, bench.memory)
-GPT_PIXEL_BYTES = {"l1": 900, "l2": 900, "none": 900, "gradnet": 3000}  # RSS 462-483 and 1732 (traced: 700);
-# gradnet raised from 2400 for gradnet_v2's extra inputs, second full-resolution layer and L1 solve (not measured)
+GPT_PIXEL_BYTES = {"l1": 900, "l2": 900, "none": 900, "gradnet": 2400}  # RSS 462-483 and 1732 (traced: 700);
+# gradnet_v2's weights 1897
 GPT_FIXED_BYTES = {"gradnet": 256 << 20}  # torch and the network (measured about 190 MB)
 ACCEL_BYTES_PER_TRIANGLE = 512  # measured 416: Embree's BVH and float32 vertices, normals, offsets
 HEADROOM = 0.9  # refuse a render that needs more than this share of the available memory
