@@ -45,12 +45,17 @@ def main(argv=None):
     p.add_argument("--spp", default="4,16")
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--ref-spp", type=int, default=2048, help="spp of the max_depth-3 references")
+    p.add_argument("--depths", default="3,scene", help="which of the two renders: 3, scene or both (3,scene)")
     p.add_argument("--methods", default=";".join(METHODS))
     p.add_argument("--out", default=os.path.join(ROOT, "bench", "results", "odis_limits"))
     a = p.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
     methods = [m for m in a.methods.split(";") if m]
     spps = [int(s) for s in a.spp.split(",")]
+    wanted = {d.strip() for d in a.depths.split(",")}
+    if not wanted or wanted - {"3", "scene"}:
+        p.error(f"--depths: expected 3, scene or 3,scene, got {a.depths!r}")
+    depths = [d for d in DEPTHS if ("scene" if d is None else str(d)) in wanted]
     records = []
     lines = ["# What limits odis (equal spp; mean over seeds, ratio to bsdf in brackets)", ""]
     for name in a.scenes.split(","):
@@ -58,7 +63,7 @@ def main(argv=None):
         full = reference_for(path)[0]  # renders at the reference's resolution (a Mitsuba film may be larger)
         scene = tracer.load_scene(path, width=full.shape[1], height=full.shape[0])
         tracer.render(scene, spp=1)
-        for depth in DEPTHS:
+        for depth in depths:
             ref = depth3_reference(scene, name, a.out, a.ref_spp) if depth == 3 else full
             rows = {}
             for m in methods:

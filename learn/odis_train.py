@@ -209,6 +209,13 @@ def inference_ms_per_1000(model, n=1024):
     return 1000.0 * (time.perf_counter() - t0) / n * 1000.0
 
 
+def data_options(data_cfg):
+    """The `learn.odis data` options that make shards of `data_cfg` (those that differ from the
+    defaults), as command-line text."""
+    flags = {"width": "--size", "centres": "--centres", "per_bin": "--per-bin", "initial_depth": "--initial-depth"}
+    return "".join(f" {flag} {data_cfg[k]}" for k, flag in flags.items() if data_cfg.get(k) != DATA_DEFAULTS[k])
+
+
 def export(run, out=None, name=None):
     """The run's best weights into tracer/weights/<name>.pt (default odis) with the manifest
     <name>.json."""
@@ -218,10 +225,12 @@ def export(run, out=None, name=None):
     seeds = sorted(int(f[6:11]) for f in names)
     x, v = check_input()
     y = odis_net.radiance_maps(model, x, v)
+    data_cfg = shard_config(os.path.join(cfg["data"], names[0]), DATA_DEFAULTS)
     manifest = {
         "name": odis_net.NAME, "model": {"width": cfg["width"]}, "map": [32, 32],
-        "data": {"command": f"python -m learn.odis data --seeds {seeds[0]}:{seeds[-1] + 1}",
-                 "config": shard_config(os.path.join(cfg["data"], names[0]), DATA_DEFAULTS), "train_scenes": len(cfg["train_scenes"]),
+        "data": {"command": (f"python -m learn.odis data --seeds {seeds[0]}:{seeds[-1] + 1}" + data_options(data_cfg)
+                            + (f" --out {cfg['data']}" if os.path.normpath(cfg["data"]) != os.path.join("learn", "data", "odis") else "")),
+                 "config": data_cfg, "train_scenes": len(cfg["train_scenes"]),
                  "validation_scenes": cfg["val_scenes_files"], "seed": cfg["seed"]},
         "train": {"command": cfg.get("command") or "python -m learn.odis train", "epochs": st["epoch"],
                   "best_epoch": st.get("best_epoch"), "batch": cfg["batch"], "lr": cfg["lr"]},

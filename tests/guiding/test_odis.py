@@ -152,11 +152,12 @@ def test_masked_bins_have_no_influence(model_kind):
     assert out[valid > 0].max() > 0
 
 
-def test_shipped_weights_reproduce_the_manifest():
+@pytest.mark.parametrize("name", ["odis", "odis_w8", "odis_full"])
+def test_shipped_weights_reproduce_the_manifest(name):
     from learn.odis_train import check_input
     from tracer.guiding.odis import net as odis_net
 
-    model, manifest = odis_net.load()
+    model, manifest = odis_net.load(name)
     x, v = check_input()
     y = odis_net.radiance_maps(model, x, v)
     np.testing.assert_allclose(y.sum(axis=(1, 2)), manifest["check"]["output_sum"], rtol=1e-3)
@@ -164,7 +165,7 @@ def test_shipped_weights_reproduce_the_manifest():
     assert manifest["parameters"] == odis_net.parameter_count(model)
 
 
-@pytest.mark.parametrize("name", ["odis", "odis_w8"])
+@pytest.mark.parametrize("name", ["odis", "odis_w8", "odis_full"])
 def test_shipped_maps_are_not_clipped_flat(name):
     """The network's outputs stay below expand's clip, and its maps are not flat. A clip below the
     network's range (the KL loss leaves the outputs' scale free) makes the bright bins equal: a clip
@@ -345,6 +346,24 @@ def test_alpha_auto_leaves_deep_renders_more_to_the_bsdf():
     g = make_guide("odis")
     assert [g.alpha_for(d) for d in (1, INITIAL_DEPTH, INITIAL_DEPTH + 1, -1)] == [ALPHA_SHALLOW] * 2 + [ALPHA_DEEP] * 2
     assert make_guide("odis", alpha=0.3).alpha_for(-1) == 0.3
+
+
+@pytest.mark.parametrize("max_depth,weights,depth", [(3, "odis", 3), (2, "odis", 3), (-1, "odis_full", 0),
+                                                     (8, "odis_full", 0)])
+def test_weights_auto_follow_the_render_depth(max_depth, weights, depth):
+    """weights auto renders max_depth up to 3 with the network trained on direct plus one-bounce
+    light, deeper ones with the one trained on full-depth initial passes and probes, whose
+    manifest asks for an initial pass at the render's own depth (initial_depth 0); a named weight
+    is kept at every depth. Detects the wrong network for a depth, or a manifest whose data depth
+    does not say what the weights were trained on."""
+    scene = _scene("cornell", 16, 16)
+    g = make_guide("odis", stride=4, reuse=0)
+    assert g.weights_for(max_depth) == weights
+    assert make_guide("odis", weights="odis_w8").weights_for(max_depth) == "odis_w8"
+    r = tracer.render(scene, spp=3, guide=g, seed=4, max_depth=max_depth)
+    assert_clean(r)
+    assert g.stats()["weights"] == weights and g.initial_depth() == depth
+    assert g.stats()["fallback"] is None and g.stats()["pixels_guided"] > 0
 
 
 def test_settings_are_checked():

@@ -4,7 +4,7 @@ a checkpoint and a resume, export, and a render with the exported weights.
 What it can detect: a shard that differs between two calls for one seed (non-determinism); shards
 whose ground truth lies outside the valid hemisphere or whose masks disagree with the features;
 a resumed run whose weights differ from an uninterrupted one's; an export whose manifest does not
-describe its weights or the data's depth; weights the guide cannot render with.
+describe its weights, the data's depth or the data command's options; weights the guide cannot render with.
 """
 import argparse
 import os
@@ -73,6 +73,8 @@ def test_resume_export_and_render(shards, tmp_path):
     wdir = str(tmp_path / "weights")
     man = export(resumed, wdir, name="tiny")
     assert man["data"]["config"]["initial_depth"] == 3 and man["data"]["config"]["per_bin"] == TINY["per_bin"]
+    cmd = man["data"]["command"]  # the options that remake the data
+    assert f"--size {TINY['width']}" in cmd and f"--per-bin {TINY['per_bin']}" in cmd and "--initial-depth" not in cmd
     model, manifest = odis_net.load("tiny", folder=wdir)
     assert manifest["parameters"] == odis_net.parameter_count(model) == man["parameters"]
     g = make_guide("odis", stride=4)

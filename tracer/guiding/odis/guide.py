@@ -12,7 +12,8 @@ The schedule of a render:
    samples never enter the image.
 2. Maps: at every `stride`-th pixel in x and y (the centres), the samples of the k x k pixels
    around it are binned into its 32 x 32 world-space sphere grid (odis_input.gather), and the
-   network (odis_net, shipped weights) reconstructs the map of every bin, in one batched torch
+   network (odis_net, shipped weights; `auto`: `odis` up to max_depth 3, `odis_full` beyond,
+   weights_for) reconstructs the map of every bin, in one batched torch
    call (`maps reference`: probe-traced maps instead, a diagnostic). Each film pixel's map is the
    bilinear blend of its four nearest centres' maps, cut to the hemisphere above its own mean
    first-hit normal, quantised straight into sampling tables (the `directional` layout, one
@@ -44,6 +45,8 @@ from ..contract import empty_state
 N_THETA = N_PHI = 32
 INITIAL_DEPTH = 3  # direct plus one-bounce indirect light at the first hit (weights trained so)
 ALPHA_SHALLOW, ALPHA_DEEP = 0.5, 0.7  # alpha auto (OdisGuide.alpha_for); why: docs/odis.md
+# weights auto (OdisGuide.weights_for): trained on direct plus one-bounce light, and on all of it
+WEIGHTS_SHALLOW, WEIGHTS_DEEP = "odis", "odis_full"
 MAPS = ("network", "reference")
 CENTRE_CHUNK = 4096  # centres gathered and inferred at a time
 SMALL_K, LARGE_K = 11, 21  # the gather window (section 4.3): the larger one below 8 initial spp
@@ -253,7 +256,7 @@ class OdisGuide(Guide):
     # (2380-2570 beyond bsdf's), and 250 MB fixed (torch, the network)
     pixel_bytes = 3300
     fixed_bytes = 384 << 20
-    DEFAULTS = {"initial": 1, "k": "auto", "stride": 8, "alpha": "auto", "weights": "odis", "batch": 128,
+    DEFAULTS = {"initial": 1, "k": "auto", "stride": 8, "alpha": "auto", "weights": "auto", "batch": 128,
                 "maps": "network", "reference_per_bin": 16, "reuse": 1}
 
     def __init__(self, **settings):
@@ -281,6 +284,8 @@ class OdisGuide(Guide):
         self.reuse = bool(s["reuse"])
         self.settings = s
         self.model = None
+        self._loaded = None  # the name of the weights in self.model (None: set from outside)
+        self._render_depth = -1
         self._state = empty_state(N_THETA, N_PHI)
         self._stats = {}
 
@@ -322,11 +327,24 @@ class OdisGuide(Guide):
             rowcum=t.rowcum, dens=t.dens, wsum=t.wsum, pscale=t.pscale, pixel_slot=slot,
             pixel_alpha=np.full(n_pixels, self.alpha_for(INITIAL_DEPTH)))
 
+    def weights_for(self, max_depth):
+        """The shipped weights a render of `max_depth` uses: the setting, or with `auto`
+        WEIGHTS_SHALLOW up to INITIAL_DEPTH (trained on direct plus one-bounce light) and
+        WEIGHTS_DEEP beyond it and at no limit (trained on initial passes and probes of the scene's
+        whole depth)."""
+        if self.weights != "auto":
+            return self.weights
+        return WEIGHTS_SHALLOW if 0 < max_depth <= INITIAL_DEPTH else WEIGHTS_DEEP
+
     def _load(self):
-        if self.model is None:
+        """The network for the current render's depth (loaded once per weights; a model set from
+        outside, with its manifest, is kept)."""
+        name = self.weights_for(self._render_depth)
+        if self.model is None or (self._loaded is not None and self._loaded != name):
             from . import net as odis_net
 
-            self.model, self.manifest = odis_net.load(self.weights)
+            self.model, self.manifest = odis_net.load(name)
+            self._loaded = name
         return self.model
 
     def initial_depth(self):
@@ -477,4 +495,5 @@ class OdisGuide(Guide):
         out.update(name=self.name, settings=dict(self.settings), inference_s=self.time_inference)
         if self.model is not None:
             out["parameters"] = int(self.manifest.get("parameters", 0))
+            out["weights"] = self.manifest.get("name", self._loaded)
         return out
