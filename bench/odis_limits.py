@@ -4,7 +4,8 @@
 
 Per scene, at equal spp, trimmed MrSE and relMSE (mean over seeds, ratio to bsdf) of:
     bsdf                      BSDF sampling
-    odis                      the shipped network's maps (weights odis)
+    odis                      the shipped network's maps (weights auto: odis at max_depth 3,
+                              odis_full at the scene's depth)
     odis:weights=odis_w8      the wider network
     odis:maps=reference       probe-traced maps at each centre (what the network is trained to
                               give, with 16 probes per bin; no network): the maps' ceiling

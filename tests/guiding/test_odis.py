@@ -366,6 +366,23 @@ def test_weights_auto_follow_the_render_depth(max_depth, weights, depth):
     assert g.stats()["fallback"] is None and g.stats()["pixels_guided"] > 0
 
 
+def test_one_guide_changes_weights_with_the_render_depth():
+    """A guide object rendered at max_depth 3, then at full depth, then at 3 again loads the
+    weights of each depth; a model set from outside stays whatever the depth. Detects weights
+    kept from the last render of another depth, or an outside model silently replaced."""
+    scene = _scene("cornell", 16, 16)
+    g = make_guide("odis", stride=4)
+    for depth, name in ((3, "odis"), (-1, "odis_full"), (3, "odis")):
+        assert_clean(tracer.render(scene, spp=3, guide=g, seed=4, max_depth=depth))
+        assert g.stats()["weights"] == name and g.stats()["pixels_guided"] > 0
+    from tracer.guiding.odis import net as odis_net
+
+    g.model, g.manifest = odis_net.load("odis_w8")
+    for depth in (3, -1):
+        assert_clean(tracer.render(scene, spp=3, guide=g, seed=4, max_depth=depth))
+        assert g.stats()["weights"] == "odis_w8"
+
+
 def test_settings_are_checked():
     from tracer.errors import SettingsError
 

@@ -83,3 +83,4 @@ def test_resume_export_and_render(shards, tmp_path):
     r = tracer.render(sc, spp=4, guide=g)
     assert r.stats["nonfinite_samples"] == 0
     assert g.stats()["fallback"] is None and g.stats()["pixels_guided"] > 0, "the exported network never ran"
+    assert g.stats()["weights"] == "tiny", "the guide rendered with other weights than the exported ones"

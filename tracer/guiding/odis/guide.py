@@ -284,7 +284,7 @@ class OdisGuide(Guide):
         self.reuse = bool(s["reuse"])
         self.settings = s
         self.model = None
-        self._loaded = None  # the name of the weights in self.model (None: set from outside)
+        self._loaded = None  # (name, model) of the weights _load loaded (a model set from outside is kept)
         self._render_depth = -1
         self._state = empty_state(N_THETA, N_PHI)
         self._stats = {}
@@ -340,11 +340,12 @@ class OdisGuide(Guide):
         """The network for the current render's depth (loaded once per weights; a model set from
         outside, with its manifest, is kept)."""
         name = self.weights_for(self._render_depth)
-        if self.model is None or (self._loaded is not None and self._loaded != name):
+        own = self._loaded is not None and self._loaded[1] is self.model
+        if self.model is None or (own and self._loaded[0] != name):
             from . import net as odis_net
 
             self.model, self.manifest = odis_net.load(name)
-            self._loaded = name
+            self._loaded = (name, self.model)
         return self.model
 
     def initial_depth(self):
@@ -495,5 +496,5 @@ class OdisGuide(Guide):
         out.update(name=self.name, settings=dict(self.settings), inference_s=self.time_inference)
         if self.model is not None:
             out["parameters"] = int(self.manifest.get("parameters", 0))
-            out["weights"] = self.manifest.get("name", self._loaded)
+            out["weights"] = self.manifest.get("name")
         return out
