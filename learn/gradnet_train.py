@@ -35,7 +35,7 @@ from tracer.gradient.gradnet import GradNet, expand, mu_law
 
 from .gradnet_data import DEFAULTS as DATA_DEFAULTS, N_CHANNELS
 from .gradnet_loss import first_order_loss, g_loss, grad_loss, data_loss, lambda_schedule, total_loss
-from .shards import list_shards, shard_config
+from .shards import changed_options, list_shards, shard_config
 from .photon_train import (_save, _write_json, best_model, end_epoch, epochs_left, open_run, optimiser_step,
                            start_training)
 
@@ -306,10 +306,8 @@ def export(run, out=None, name=None):
     data_cfg = shard_config(os.path.join(cfg["data"], names[0]), DATA_DEFAULTS)
     val_cfg = shard_config(os.path.join(cfg["data"], cfg["val_scenes_files"][0]), DATA_DEFAULTS)
     ref_opt = f" --reference-spp {val_cfg['reference_spp']}" if val_cfg["reference_spp"] else ""
-    opts = "".join(f" --{flag} {value}" for flag, key, value in (
-        ("size", "width", data_cfg["width"]), ("patch", "patch", data_cfg["patch"]),
-        ("patches", "patches", data_cfg["patches"]), ("spp", "spp", ",".join(str(v) for v in data_cfg["spp"])),
-        ("box", "box", data_cfg.get("box", 0.0))) if data_cfg.get(key, DATA_DEFAULTS[key]) != DATA_DEFAULTS[key])
+    opts = changed_options(data_cfg, DATA_DEFAULTS, {"width": "--size", "patch": "--patch", "patches": "--patches",
+                                                     "spp": "--spp", "box": "--box"})
     command = " && ".join(f"python -m learn.gradnet data --seeds {lo}:{hi}{opts}" + (ref_opt if val else "")
                           for lo, hi, val in (seed_runs(cfg["train_scenes"], False) + seed_runs(cfg["val_scenes_files"], True)))
     y = gradnet.reconstruct(model, **check_input())

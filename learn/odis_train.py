@@ -31,7 +31,7 @@ from tracer.guiding.odis.net import OdisUNet, features, target
 
 from .odis_data import DEFAULTS as DATA_DEFAULTS
 from .odis_data import load_shards
-from .shards import shard_config
+from .shards import changed_options, shard_config
 from .photon_train import (_save, _write_json, best_model, end_epoch, epochs_left, open_run, optimiser_step,
                            start_training)
 
@@ -209,11 +209,7 @@ def inference_ms_per_1000(model, n=1024):
     return 1000.0 * (time.perf_counter() - t0) / n * 1000.0
 
 
-def data_options(data_cfg):
-    """The `learn.odis data` options that make shards of `data_cfg` (those that differ from the
-    defaults), as command-line text."""
-    flags = {"width": "--size", "centres": "--centres", "per_bin": "--per-bin", "initial_depth": "--initial-depth"}
-    return "".join(f" {flag} {data_cfg[k]}" for k, flag in flags.items() if data_cfg.get(k) != DATA_DEFAULTS[k])
+DATA_FLAGS = {"width": "--size", "centres": "--centres", "per_bin": "--per-bin", "initial_depth": "--initial-depth"}
 
 
 def export(run, out=None, name=None):
@@ -228,7 +224,7 @@ def export(run, out=None, name=None):
     data_cfg = shard_config(os.path.join(cfg["data"], names[0]), DATA_DEFAULTS)
     manifest = {
         "name": odis_net.NAME, "model": {"width": cfg["width"]}, "map": [32, 32],
-        "data": {"command": (f"python -m learn.odis data --seeds {seeds[0]}:{seeds[-1] + 1}" + data_options(data_cfg)
+        "data": {"command": (f"python -m learn.odis data --seeds {seeds[0]}:{seeds[-1] + 1}" + changed_options(data_cfg, DATA_DEFAULTS, DATA_FLAGS)
                             + (f" --out {cfg['data']}" if os.path.normpath(cfg["data"]) != os.path.join("learn", "data", "odis") else "")),
                  "config": data_cfg, "train_scenes": len(cfg["train_scenes"]),
                  "validation_scenes": cfg["val_scenes_files"], "seed": cfg["seed"]},

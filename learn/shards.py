@@ -83,6 +83,13 @@ def save_npz(path, **arrays):
     replace_atomically(path, lambda tmp: np.savez_compressed(tmp, **arrays))
 
 
+def changed_options(cfg, defaults, flags):
+    """The command-line options, as text, that remake a data config `cfg`: ` FLAG VALUE` for each
+    key of `flags` ({config key: flag}) whose value differs from `defaults` (lists comma-joined)."""
+    text = lambda v: ",".join(str(x) for x in v) if isinstance(v, (list, tuple)) else str(v)  # noqa: E731
+    return "".join(f" {flag} {text(cfg[k])}" for k, flag in flags.items() if cfg.get(k, defaults[k]) != defaults[k])
+
+
 def shard_config(path, defaults):
     """The data config the shard at `path` was made with, over `defaults` (all of them where the
     shard is gone or predates a key)."""
