@@ -31,10 +31,12 @@ import tracer
 from . import atomic, scenes
 
 NAMED = {"open-1k": lambda: scenes.open_scene(3), "open-1m": lambda: scenes.open_scene(8),
-         "mitsuba-cornell": scenes.mitsuba_cornell}
+         "mitsuba-cornell": scenes.mitsuba_cornell,
+         "staircase": lambda: {"obj": STAIRCASE, "parts": None}}
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CORNELL = os.path.join(ROOT, "scenes", "cornell", "cornell.obj")
+STAIRCASE = os.path.join(os.path.dirname(ROOT), "shared", "scenes-mitsuba", "staircase", "scene.xml")
 
 
 def scene_spec(name):
@@ -44,20 +46,21 @@ def scene_spec(name):
     return {"obj": name, "parts": None}
 
 
-def measure(path, accel, spp, max_depth, rr_depth, width, height, threads, repeat):
+def measure(path, accel, spp, max_depth, rr_depth, width, height, threads, repeat, path_loop="thread"):
     over = {}
     if width:
         over["width"] = width
     if height:
         over["height"] = height
     scene = tracer.load_scene(scene_spec(path)["obj"], **over)
-    tracer.render(scene, spp=1, accel=accel, max_depth=max_depth, rr_depth=rr_depth, threads=threads)
-    runs = [tracer.render(scene, spp=spp, accel=accel, max_depth=max_depth, rr_depth=rr_depth,
-                          threads=threads).stats for _ in range(max(1, repeat))]
+    kw = dict(accel=accel, max_depth=max_depth, rr_depth=rr_depth, threads=threads, path_loop=path_loop)
+    tracer.render(scene, spp=1, **kw)
+    runs = [tracer.render(scene, spp=spp, **kw).stats for _ in range(max(1, repeat))]
     speeds = sorted(r["msamples_per_s"] for r in runs)
     s = max(runs, key=lambda r: r["msamples_per_s"])
     return {
-        "scene": path if path in NAMED else os.path.relpath(path, ROOT), "accel": accel, "width": scene.width, "height": scene.height,
+        "scene": path if path in NAMED else os.path.relpath(path, ROOT), "accel": accel, "path_loop": path_loop,
+        "width": scene.width, "height": scene.height,
         "triangles": scene.n_triangles, "spp": spp, "max_depth": max_depth, "rr_depth": rr_depth,
         "seconds": round(s["time_total"], 3), "msamples_per_s": round(s["msamples_per_s"], 3),
         "msamples_per_s_median": round(speeds[len(speeds) // 2], 3), "repeat": len(runs),
@@ -66,32 +69,63 @@ def measure(path, accel, spp, max_depth, rr_depth, width, height, threads, repea
     }
 
 
-def vs_mitsuba(names, spp, max_depth, rr_depth, threads, repeat):
-    """Alternate our render (embree) and Mitsuba's on each scene; rows of Msamples/s."""
-    from . import mitsuba_side
+class _Worker:
+    """A bench.throughput_worker process: one renderer, its scene loaded and warmed up."""
 
+    def __init__(self, side, job):
+        self.proc = subprocess.Popen([sys.executable, "-m", "bench.throughput_worker", side, json.dumps(job)],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT,
+                                     env=dict(os.environ, PYTHONPATH=ROOT))
+        self.info = self._read()["ready"]
+
+    def _read(self):
+        line = self.proc.stdout.readline()
+        if not line:
+            raise RuntimeError(f"throughput worker exited with code {self.proc.wait()}")
+        return json.loads(line)
+
+    def render(self, seed):
+        self.proc.stdin.write(f"{seed}\n")
+        self.proc.stdin.flush()
+        return self._read()
+
+    def close(self):
+        self.proc.stdin.close()
+        self.proc.wait()
+
+
+def vs_mitsuba(names, spp, max_depth, rr_depth, threads, repeat, width=None, height=None, path_loops=("thread",)):
+    """Alternate our render (embree; one process per path loop) and Mitsuba's (its own process) on
+    each scene; rows of Msamples/s, ours per path loop."""
     rows = []
     for name in names:
-        spec = scene_spec(name)
-        ours = tracer.load_scene(spec["obj"])
-        theirs = mitsuba_side.load(spec, spp, max_depth, rr_depth)
-        n = ours.width * ours.height * spp
-        kw = dict(spp=spp, max_depth=max_depth, rr_depth=rr_depth, threads=threads)
-        tracer.render(ours, **kw)
-        mitsuba_side.render_seconds(theirs, spp)
-        a, b, stages = [], [], []
+        job = dict(scene=name, spp=spp, max_depth=max_depth, rr_depth=rr_depth, width=width, height=height,
+                   threads=threads)
+        ours = {loop: _Worker("ours", dict(job, path_loop=loop)) for loop in path_loops}
+        first = ours[path_loops[0]].info
+        theirs = _Worker("mitsuba", dict(job, width=first["width"], height=first["height"]))
+        runs = {loop: [] for loop in path_loops}
+        b = []
         for r in range(max(1, repeat)):
-            st = tracer.render(ours, seed=r, **kw).stats
-            a.append(st["msamples_per_s"])
-            stages.append(st["time_stages"])
-            b.append(n / mitsuba_side.render_seconds(theirs, spp, seed=r) / 1e6)
+            for loop in path_loops:
+                runs[loop].append(ours[loop].render(r))
+            m = theirs.render(r)
+            b.append(m["samples"] / m["seconds"] / 1e6)
+        for w in (*ours.values(), theirs):
+            w.close()
         med = lambda x: sorted(x)[len(x) // 2]  # noqa: E731
-        rows.append({"scene": name, "triangles": ours.n_triangles, "spp": spp, "ours": med(a), "mitsuba": med(b),
-                     "ratio": med(a) / med(b), "ours_runs": a, "mitsuba_runs": b,
-                     "stages": {k: round(v, 3) for k, v in stages[a.index(med(a))].items()}})
-        print(f"{name} ({ours.n_triangles} triangles, {ours.width}x{ours.height}, {spp} spp): ours "
-              f"{med(a):.2f} Msamples/s, Mitsuba {med(b):.2f}: {med(a) / med(b):.2f}x "
-              f"(medians of {len(a)} alternated runs; ours {min(a):.2f}-{max(a):.2f}, Mitsuba {min(b):.2f}-{max(b):.2f})")
+        for loop in path_loops:
+            a = [x["samples"] / x["seconds"] / 1e6 for x in runs[loop]]
+            mid = runs[loop][a.index(med(a))]
+            rows.append({"scene": name, "triangles": first["triangles"], "width": first["width"],
+                         "height": first["height"], "spp": spp, "path_loop": loop, "ours": med(a), "mitsuba": med(b),
+                         "ratio": med(a) / med(b), "ours_runs": a, "mitsuba_runs": b,
+                         "rays_per_sample": round(mid["rays"] / mid["samples"], 3),
+                         "stages": {k: round(v, 3) for k, v in mid["stages"].items()}})
+            print(f"{name} ({first['triangles']} triangles, {first['width']}x{first['height']}, {spp} spp), "
+                  f"path loop {loop}: ours {med(a):.2f} Msamples/s, Mitsuba {med(b):.2f}: {med(a) / med(b):.2f}x "
+                  f"(medians of {len(a)} alternated runs in separate processes; ours {min(a):.2f}-{max(a):.2f}, "
+                  f"Mitsuba {min(b):.2f}-{max(b):.2f})", flush=True)
     return rows
 
 
@@ -149,11 +183,11 @@ def stage_table(rows):
     if not rows:
         return
     stages = [k for k in rows[0]["stages"] if any(r["stages"].get(k, 0.0) > 0 for r in rows)]
-    print("\n| scene | accel | Msamples/s | " + " | ".join(stages) + " |")
-    print("|---" * (3 + len(stages)) + "|")
+    print("\n| scene | accel | path loop | Msamples/s | " + " | ".join(stages) + " |")
+    print("|---" * (4 + len(stages)) + "|")
     for r in rows:
         ms = r.get("msamples_per_s", r.get("ours"))
-        print(f"| {r['scene']} | {r.get('accel', 'embree')} | {ms:.2f} | "
+        print(f"| {r['scene']} | {r.get('accel', 'embree')} | {r.get('path_loop', 'thread')} | {ms:.2f} | "
               + " | ".join(f"{r['stages'].get(k, 0.0):.3f}" for k in stages) + " |")
 
 
@@ -167,6 +201,7 @@ def main(argv=None):
     p.add_argument("--width", type=int, default=None, help="default: the scene's (256 for the Cornell box)")
     p.add_argument("--height", type=int, default=None)
     p.add_argument("--threads", type=int, default=None)
+    p.add_argument("--path-loops", default="thread", help="comma-separated: thread (per-thread loop), wave (wavefront)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per scene and accel (best is reported)")
     p.add_argument("--json", default=None, help="also write the records to this file")
     p.add_argument("--vs-mitsuba", action="store_true",
@@ -188,23 +223,25 @@ def main(argv=None):
         if a.load:
             rows += [{"load": n, "runs": load_times(n, a.repeat, why is None)} for n in names]
         else:
-            rows += vs_mitsuba(names, a.spp, a.max_depth, a.rr_depth, a.threads, a.repeat)
+            rows += vs_mitsuba(names, a.spp, a.max_depth, a.rr_depth, a.threads, a.repeat, a.width, a.height,
+                               tuple(a.path_loops.split(",")))
             stage_table(rows)
         names = []
     else:
         names = a.scenes.split(",")
-    for path in names:
-        for accel in a.accels.split(","):
-            row = measure(path, accel, a.spp, a.max_depth, a.rr_depth, a.width, a.height, a.threads, a.repeat)
-            rows.append(row)
-            st = row["stages"]
-            total = sum(st.values()) or 1.0
-            parts = ", ".join(f"{k} {v:.2f}s ({100 * v / total:.0f}%)" for k, v in st.items() if v > 0)
-            print(f"{row['scene']} [{accel}] {row['width']}x{row['height']} {row['spp']} spp: "
-                  f"{row['msamples_per_s']:.3f} Msamples/s (median of {row['repeat']}: "
-                  f"{row['msamples_per_s_median']:.3f}), {row['mrays_per_s']:.2f} Mrays/s, "
-                  f"{row['rays_per_sample']} rays/sample, {row['seconds']:.2f} s")
-            print(f"    {parts}")
+    cells = [(path, accel, loop) for path in names for accel in a.accels.split(",")
+             for loop in (a.path_loops.split(",") if accel == "embree" else ["wave"])]
+    for path, accel, loop in cells:
+        row = measure(path, accel, a.spp, a.max_depth, a.rr_depth, a.width, a.height, a.threads, a.repeat, loop)
+        rows.append(row)
+        st = row["stages"]
+        total = sum(st.values()) or 1.0
+        parts = ", ".join(f"{k} {v:.2f}s ({100 * v / total:.0f}%)" for k, v in st.items() if v > 0)
+        print(f"{row['scene']} [{accel}, {loop}] {row['width']}x{row['height']} {row['spp']} spp: "
+              f"{row['msamples_per_s']:.3f} Msamples/s (median of {row['repeat']}: "
+              f"{row['msamples_per_s_median']:.3f}), {row['mrays_per_s']:.2f} Mrays/s, "
+              f"{row['rays_per_sample']} rays/sample, {row['seconds']:.2f} s")
+        print(f"    {parts}")
     stage_table([r for r in rows if "accel" in r])
     if a.json:
         os.makedirs(os.path.dirname(os.path.abspath(a.json)), exist_ok=True)

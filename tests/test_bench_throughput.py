@@ -32,9 +32,14 @@ def test_throughput_rows(tmp_path, monkeypatch, capsys):
     monkeypatch.setitem(throughput.NAMED, "open-tiny", lambda: scenes.open_scene(1))
     out = tmp_path / "rows.json"
     assert throughput.main(["--scenes", "open-tiny", "--accels", "embree", "--spp", "1", "--repeat", "1",
-                            "--width", "16", "--height", "16", "--json", str(out)]) == 0
+                            "--width", "16", "--height", "16", "--path-loops", "thread,wave", "--json", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "open-tiny [embree] 16x16 1 spp" in text
-    assert "| open-tiny | embree |" in text  # the per-stage table
+    assert "open-tiny [embree, thread] 16x16 1 spp" in text and "open-tiny [embree, wave] 16x16 1 spp" in text
+    assert "| open-tiny | embree | thread |" in text  # the per-stage table
     rows = json.loads(out.read_text())
+    assert [r["path_loop"] for r in rows] == ["thread", "wave"]
     assert rows[0]["triangles"] == 84 and rows[0]["rays_per_sample"] >= 1.0
+    # the same paths either way: the same rays per sample; each loop leaves the other's stages at 0
+    assert rows[0]["rays_per_sample"] == rows[1]["rays_per_sample"]
+    assert rows[0]["stages"]["intersect"] == 0 and rows[0]["stages"]["shade"] == 0
+    assert rows[1]["stages"]["trace"] == 0

@@ -31,6 +31,8 @@ class RenderContext:
     n_pixels     film pixels, w * h
     guide_state  the GuideState the kernels sample from (an empty one: BSDF sampling); set by the
                  render from guide.state() after each update
+    path_loop    "thread": waves that record and split nothing run the per-thread path loop
+                 (integrators.thread_loop; Embree only), "wave": every wave runs the wavefront
     """
 
     def __init__(self, scene, accel, lights, seed, max_depth, rr_depth, pixel_filter, crop, nee=True):
@@ -52,6 +54,7 @@ class RenderContext:
                                  tex.data, scene.materials.table)
         self.n_pixels = int(self.crop[2] * self.crop[3])
         self.guide_state = empty_state()
+        self.path_loop = "thread"
 
     def __repr__(self):
         x0, y0, w, h = (int(v) for v in self.crop)

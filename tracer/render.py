@@ -41,6 +41,7 @@ from .wave import Stats, WaveBuffers
 DEFAULT_WAVE = 1 << 16
 log = logging.getLogger("tracer")
 FILTERS = ("box", "point")
+PATH_LOOPS = ("thread", "wave")
 
 
 def _check_crop(crop, width, height):
@@ -65,7 +66,7 @@ def _int_setting(name, value, lo):
 def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=None, seed=None,
            accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
            guide_settings=None, pixel_filter="box", crop=None, integrator="path", integrator_settings=None,
-           shift=None, recon=None, recon_alpha=None, shift_roughness=None, recon_settings=None):
+           shift=None, recon=None, recon_alpha=None, shift_roughness=None, recon_settings=None, path_loop="thread"):
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
     spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
@@ -78,6 +79,9 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                ...)) is accepted too, and can be inspected after.
     max_depth, rr_depth, seed: override the scene's render settings (Mitsuba conventions)
     accel      "embree" or "numba"; threads: worker threads (default: all cores)
+    path_loop  "thread" (default): passes that record and split nothing trace each thread's paths to
+               their end in packets of 16 (tracer.integrators.thread_loop; Embree only); "wave": every
+               pass runs the wavefront, one kernel per stage. The images are the same bit for bit.
     callback   f(pass_index, film, stats_dict) called after every pass; return False to stop
     pixel_filter  "box" (default: samples uniform over the pixel) or "point" (every sample
                through the pixel centre: no anti-aliasing, so a pixel never mixes two surfaces;
@@ -129,7 +133,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     n_threads = min(threads or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS)
     with _NumbaThreads(n_threads):  # every kernel of this render on n_threads, restored after
         return _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress,
-                       callback, guide_settings, pixel_filter, crop,
+                       callback, guide_settings, pixel_filter, crop, path_loop,
                        _integrator(integrator, integrator_settings, shift, recon, recon_alpha, shift_roughness,
                                    recon_settings))
 
@@ -193,11 +197,13 @@ def make_context(scene, accel="embree", seed=None, max_depth=None, rr_depth=None
 
 
 def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress, callback,
-            guide_settings, pixel_filter, crop, integ):
+            guide_settings, pixel_filter, crop, path_loop, integ):
     """render() on n_threads Numba threads, with the Integrator `integ`."""
     rs = scene.render
     max_depth, rr_depth, seed, crop = _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop)
     wave_size = _int_setting("wave_size", wave_size, 1)
+    if path_loop not in PATH_LOOPS:
+        raise unknown_name("path loop", path_loop, PATH_LOOPS)
     if time is None:
         spp = _int_setting("spp", rs.spp if spp is None else spp, 1)
     elif not (isinstance(time, (int, float)) and math.isfinite(time) and time > 0):
@@ -224,10 +230,13 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     lights = build_lights(scene)
     t_setup = _time.perf_counter() - t_start
     ctx = RenderContext(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter, crop, integ.nee)
-    # Trace one throwaway path first: it compiles the kernels (or loads them from the cache), so
-    # that neither the time budget nor the stats count Numba's compile.
+    ctx.path_loop = path_loop
+    # Trace throwaway paths first (recorded: the wavefront; not: the per-thread loop): they compile
+    # the kernels (or load them from the cache), so that neither the time budget nor the stats
+    # count Numba's compile.
     t0 = _time.perf_counter()
     trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats(), observe=lambda rec: None)
+    trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats())
     splits = g is not None and g.splits
     if g is not None:
         warm_up_guides(ctx)
@@ -251,7 +260,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
                    if time is None else "{desc}: {n:.0f} spp [{elapsed}, budget %gs]" % time)
     settings = {"accel": acc.name, "threads": int(n_threads), "seed": int(seed), "max_depth": int(max_depth),
                 "rr_depth": int(rr_depth), "guide": guide, "pixel_filter": pixel_filter, "crop": list(crop),
-                "wave_size": int(wave_size), **integ.stats_settings(), **provenance()}
+                "wave_size": int(wave_size), "path_loop": path_loop, **integ.stats_settings(), **provenance()}
 
     def snapshot():
         return _stats(scene, stats, session.passes, session.sample0, t_setup, t_start, t_render, settings, t_compile,

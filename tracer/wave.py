@@ -221,7 +221,7 @@ class WaveBuffers:
 class Stats:
     """Wall time per stage and ray counts."""
 
-    STAGES = ("camera", "intersect", "split", "shift", "shade", "occluded", "compact", "film", "record")
+    STAGES = ("camera", "trace", "intersect", "split", "shift", "shade", "occluded", "compact", "film", "record")
 
     def __init__(self):
         self.time = {s: 0.0 for s in self.STAGES}

@@ -89,7 +89,7 @@ _OCCLUDED16 = ctypes.cast(_LIB.rtcOccluded16, ctypes.c_void_p).value
 
 
 @intrinsic
-def _call4(typingctx, fn, a, b, c, d):
+def call4(typingctx, fn, a, b, c, d):
     """Call the C function at address `fn` as void fn(void*, void*, void*, void*) with integers
     a, b, c, d."""
     sig = types.void(fn, a, b, c, d)
@@ -105,7 +105,7 @@ def _call4(typingctx, fn, a, b, c, d):
 
 
 @jit
-def _load_lane(buf, ib, k, org, dirs, i, centre, tfar):
+def load_lane(buf, ib, k, org, dirs, i, centre, tfar):
     """Fill lane k of the packet in scratch row `buf` (ib: the same row as int32) with ray i and
     mark it valid; False (the lane untouched) if the ray is invalid."""
     ok = True
@@ -182,19 +182,51 @@ def _refine(plane, p, o, d, t, b1, b2, i):
 
 
 @jit
-def _fill_packet(buf, ib, org, dirs, tmax, has_tmax, base, m, centre):
-    """Load rays base .. base+m-1 into the packet in scratch row `buf` (lanes past m, and invalid
-    rays, left invalid; no hit recorded in any lane); True if any lane is valid."""
+def clear_packet(ib):
+    """Mark every lane of the packet in scratch row `ib` (int32 view) invalid, with no hit."""
     L = _LANES
-    any_valid = False
     for k in range(L):
         ib[_VALID * L + k] = 0
         ib[17 * L + k] = -1  # primID, geomID (RTC_INVALID_GEOMETRY_ID until a hit), instID
         ib[18 * L + k] = -1
         ib[19 * L + k] = -1
+
+
+@jit
+def read_hit(buf, ib, k, refine, plane, org, dirs, t, prim, b1, b2, i):
+    """Closest hit of lane k after rtcIntersect16, for ray i of org, dirs: into t, prim, b1, b2[i]
+    (left as they are where the lane was invalid or missed), refined in float64 if `refine`."""
+    L = _LANES
+    if ib[_VALID * L + k] == 0 or ib[18 * L + k] == -1:
+        return
+    p = ib[17 * L + k]
+    prim[i] = p
+    t[i] = buf[8 * L + k]
+    if refine:
+        b1[i] = 1.0 / 3.0  # kept only if the float64 refinement fails (ray along the plane)
+        b2[i] = 1.0 / 3.0
+        _refine(plane, p, (org[i, 0], org[i, 1], org[i, 2]), (dirs[i, 0], dirs[i, 1], dirs[i, 2]), t, b1, b2, i)
+    else:
+        b1[i] = buf[15 * L + k]
+        b2[i] = buf[16 * L + k]
+
+
+@jit
+def lane_occluded(buf, ib, k):
+    """Whether lane k's shadow ray was blocked, after rtcOccluded16 (an invalid lane never is)."""
+    # Embree sets tfar to -inf when something blocks the ray
+    return ib[_VALID * _LANES + k] != 0 and buf[8 * _LANES + k] == -np.inf
+
+
+@jit
+def _fill_packet(buf, ib, org, dirs, tmax, has_tmax, base, m, centre):
+    """Load rays base .. base+m-1 into the packet in scratch row `buf` (lanes past m, and invalid
+    rays, left invalid; no hit recorded in any lane); True if any lane is valid."""
+    clear_packet(ib)
+    any_valid = False
     for k in range(m):
         i = base + k
-        if _load_lane(buf, ib, k, org, dirs, i, centre, tmax[i] if has_tmax else np.inf):
+        if load_lane(buf, ib, k, org, dirs, i, centre, tmax[i] if has_tmax else np.inf):
             any_valid = True
     return any_valid
 
@@ -221,22 +253,9 @@ def _intersect(fn, scene, plane, centre, org, dirs, tmax, refine, scratch, t, pr
                 b2[i] = 0.0
             if not _fill_packet(buf, ib, org, dirs, tmax, has_tmax, base, m, centre):
                 continue
-            _call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
+            call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
             for k in range(m):
-                if ib[_VALID * L + k] == 0 or ib[18 * L + k] == -1:
-                    continue
-                i = base + k
-                p = ib[17 * L + k]
-                prim[i] = p
-                t[i] = buf[8 * L + k]
-                if refine:
-                    b1[i] = 1.0 / 3.0  # kept only if the float64 refinement fails (ray along the plane)
-                    b2[i] = 1.0 / 3.0
-                    _refine(plane, p, (org[i, 0], org[i, 1], org[i, 2]), (dirs[i, 0], dirs[i, 1], dirs[i, 2]),
-                            t, b1, b2, i)
-                else:
-                    b1[i] = buf[15 * L + k]
-                    b2[i] = buf[16 * L + k]
+                read_hit(buf, ib, k, refine, plane, org, dirs, t, prim, b1, b2, base + k)
 
 
 @kernel
@@ -256,10 +275,9 @@ def _occluded(fn, scene, centre, org, dirs, tmax, scratch, out):
                 out[i] = False
             if not _fill_packet(buf, ib, org, dirs, tmax, True, base, m, centre):
                 continue
-            _call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
+            call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
             for k in range(m):
-                # Embree sets tfar to -inf when something blocks the ray
-                out[base + k] = ib[_VALID * L + k] != 0 and buf[8 * L + k] == -np.inf
+                out[base + k] = lane_occluded(buf, ib, k)
 
 
 def _scratch():

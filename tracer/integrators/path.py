@@ -27,6 +27,7 @@ beta / gain is the throughput BSDF sampling would have given (shading.russian_ro
 """
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 from numba import prange
@@ -71,6 +72,143 @@ def record_emission(r, record, b, le, w, pdf, r_L0, r_direct, r_plight):
         r_plight[r] = np.inf
 
 
+@jit(inline="always")
+def add_emission(i, depth, b, le, w, L, L_cam):
+    """Emission le with MIS weight w found by path i (throughput b) after `depth` bounces: added to
+    its radiance, and at the first hit (depth 0) kept as the light the camera ray sees directly."""
+    for c in range(3):
+        L[i, c] += b[c] * le[c] * w
+    if depth == 0:
+        for c in range(3):
+            L_cam[i, c] = b[c] * le[c] * w
+
+
+class Vertex(NamedTuple):
+    """What shade_vertex returns: the path's next ray, its shadow ray, and what a record needs."""
+
+    alive: bool  # the path goes on along next_o, next_d
+    next_o: tuple
+    next_d: tuple
+    shadow: bool  # a shadow ray from sh_o along unit sh_d up to sh_tmax adds sh_L if unblocked
+    sh_o: tuple
+    sh_d: tuple
+    sh_tmax: float
+    sh_L: tuple
+    found: bool  # emission le (MIS weight w) was found by a path of throughput b along a direction of density pdf
+    le: tuple
+    w: float
+    b: tuple
+    pdf: float
+    sampled: bool  # a continuation was sampled (or the path ended by it): the vertex's record closes
+    recorded: bool  # ... and the vertex is recorded (not delta, a density): the fields below
+    x: tuple
+    nf: tuple  # normal on the side the path arrived
+    wi: tuple
+    strategy: int
+    node: int
+    pdf_mix: float
+    pdf_bsdf: float
+    fcos: float  # luminance of |f cos|
+    beta: tuple  # throughput after the vertex (0 where the path ended)
+
+
+@jit(inline="always")
+def shade_vertex(i, wray, tk, p, u1, u2, surf, lt, gs, ps, max_depth, rr_depth, nee,
+                 beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open):
+    """Shade the vertex of path slot i that its ray (direction wray) hit at distance tk, on triangle
+    p (< 0: escaped) at barycentrics u1, u2: emission (added to L, and L_cam at the first hit),
+    AOVs, the NEE sample, the continuation from the mixture and the roulette (the path state of
+    slot i updated). Returns a Vertex: the next ray and shadow ray to trace, and what a record of
+    the vertex takes. Arguments as `shade`'s; the callers are the wavefront's `shade` and the
+    per-thread loop of tracer.integrators.thread_loop (at most 30 arguments: Python passes more
+    as *args, which Numba can neither inline nor call without copying every array)."""
+    alive = False
+    no = wray
+    shadow = False
+    so = wray
+    sd = wray
+    tmax = 0.0
+    contrib = (0.0, 0.0, 0.0)
+    found = False
+    le = contrib
+    w = 0.0
+    pdf_in = prev_pdf[i]
+    sampled = False
+    recorded = False
+    x = wray
+    nf = wray
+    wiw = wray
+    strategy = -1
+    node = -1
+    pdf = 0.0
+    pbs = 0.0
+    fcos = 0.0
+    nb = contrib
+    dk = depth[i]                                   # bounces so far (0 at the first hit)
+    b = (beta[i, 0], beta[i, 1], beta[i, 2])        # throughput up to this vertex
+    if dk == 0:
+        for c in range(3):
+            L_cam[i, c] = 0.0
+    if p < 0:
+        # Escaped: environment light, MIS-weighted against NEE's choice of it
+        if lt.env_type != ENV_NONE:
+            le, w = emitted_env(lt, wray, dk, prev_pdf[i], prev_delta[i] or not nee)
+            found = True
+            add_emission(i, dk, b, le, w, L, L_cam)
+    else:
+        # Hit point (from barycentrics: on the triangle's plane) and geometric normal
+        x = triangle_point(surf.tri, p, u1, u2)
+        ng = (surf.normal[p, 0], surf.normal[p, 1], surf.normal[p, 2])  # unit, counter-clockwise side
+        cos_o = -dot(wray, ng)  # > 0 when the path arrived on the counter-clockwise side
+        # Emission, MIS-weighted against NEE's choice of this triangle
+        if lt.light_of_tri[p] >= 0:
+            le, w = emitted_surface(lt, p, tk * tk, cos_o, dk, prev_pdf[i], prev_delta[i] or not nee)
+            found = True
+            add_emission(i, dk, b, le, w, L, L_cam)
+        sf = surface_at(surf, p, u1, u2)  # the BSDF there, textures evaluated, and its frame
+        delta = write_aovs(sf, i, dk, cos_o, tk, aov, aov_open)
+        # Continue past this vertex?
+        if not (max_depth >= 0 and dk + 1 >= max_depth):
+            wo = to_local((-wray[0], -wray[1], -wray[2]), sf.s, sf.t, sf.ns)
+            kk = key[i]  # the path's random stream
+
+            # Where the guide's map is (node, slot) and the mixing weight a (probability of BSDF sampling)
+            slot = -1
+            a = 1.0
+            nf = ng if cos_o >= 0.0 else (-ng[0], -ng[1], -ng[2])
+            if not delta and (gs.res[0] > 0 or gs.pixel_slot.shape[0] > 0):
+                node, slot, a = locate(gs, x, nf, pix[i], dk)
+
+            # Next-event estimation (not at delta BSDFs)
+            if nee and not delta:
+                shadow, so, sd, tmax, contrib = next_event(
+                    sf, lt, surf.tri, x, ng, cos_o, wo, b, gs, slot, a, surf.eps[p],
+                    surf.eps, draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
+                    draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)), surf.mat_table)
+
+            # The continuation from the mixture (the guide with probability 1 - a, else the BSDF), then
+            # possibly the end of the path by Russian roulette
+            nx = next_bounce(sf, gs, slot, a, wo, ng, cos_o, b, gain[i], dk, rr_depth, MAX_BOUNCES, ps, kk, i,
+                             surf.mat_table)
+            sampled = True
+            wiw, pdf, pbs, strategy = nx.wi, nx.pdf, nx.pdf_bsdf, nx.strategy
+            recorded = not delta and not nx.delta and pdf > 0.0
+            wt = nx.weight
+            fcos = (0.2126 * wt[0] + 0.7152 * wt[1] + 0.0722 * wt[2]) * pdf
+            if nx.ok:
+                nb = nx.beta
+                alive = True
+                no = offset_point(x, ng, wiw, surf.eps[p])
+                for c in range(3):
+                    beta[i, c] = nb[c]
+                depth[i] = dk + 1
+                prev_pdf[i] = pdf
+                prev_delta[i] = nx.delta
+                gain[i] = nx.gain
+    return Vertex(alive, no, wiw, shadow, so, sd, tmax, contrib, found, le, w, b, pdf_in, sampled, recorded,
+                  x, nf, wiw, strategy, node, pdf, pbs, fcos, nb)
+
+
 @kernel
 def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs,
           ps, max_depth, rr_depth, nee,
@@ -101,118 +239,50 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs,
     its record; or not at all (RECORD_INDIRECT). A record's `prev` is the record of the path's
     vertex before it (-1 at the first hit and after a delta vertex).
     """
-    n = active.shape[0]
-    for k in prange(n):
+    for k in prange(active.shape[0]):
         i = active[k]
-        alive[k] = False
-        has_shadow[k] = False
         if record != RECORD_NONE:
             r_strategy[rec_base + k] = -1
-        dk = depth[i]                                   # bounces so far (0 at the first hit)
-        wray = (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2])  # direction the path arrived along
-        b = (beta[i, 0], beta[i, 1], beta[i, 2])        # throughput up to this vertex
-        p = prim[k]
-        if dk == 0:
+        v = shade_vertex(i, (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2]), t[k], prim[k], b1[k], b2[k], surf, lt, gs, ps,
+                         max_depth, rr_depth, nee, beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov,
+                         aov_open)
+        alive[k] = v.alive
+        has_shadow[k] = False
+        if v.shadow:
+            write_shadow(k, v.sh_o, v.sh_d, v.sh_tmax, v.sh_L, sh_o, sh_d, sh_tmax, sh_L, has_shadow)
+        if v.alive:
             for c in range(3):
-                L_cam[i, c] = 0.0
-        if p < 0:
-            # Escaped: environment light, MIS-weighted against NEE's choice of it
-            if lt.env_type != ENV_NONE:
-                le, w = emitted_env(lt, wray, dk, prev_pdf[i], prev_delta[i] or not nee)
-                for c in range(3):
-                    L[i, c] += b[c] * le[c] * w
-                if dk == 0:
-                    for c in range(3):
-                        L_cam[i, c] = b[c] * le[c] * w
-                if record != RECORD_NONE and prev_rec[i] >= 0:
-                    record_emission(prev_rec[i], record, b, le, w, prev_pdf[i], r_L0, r_direct, r_plight)
+                next_o[k, c] = v.next_o[c]
+                next_d[k, c] = v.next_d[c]
+        if record == RECORD_NONE:
             continue
-
-        # Hit point (from barycentrics: on the triangle's plane) and geometric normal
-        x = triangle_point(surf.tri, p, b1[k], b2[k])
-        ng = (surf.normal[p, 0], surf.normal[p, 1], surf.normal[p, 2])  # unit, counter-clockwise side
-        cos_o = -dot(wray, ng)  # > 0 when the path arrived on the counter-clockwise side
-
-        # Emission, MIS-weighted against NEE's choice of this triangle
-        if lt.light_of_tri[p] >= 0:
-            le, w = emitted_surface(lt, p, t[k] * t[k], cos_o, dk, prev_pdf[i], prev_delta[i] or not nee)
-            for c in range(3):
-                L[i, c] += b[c] * le[c] * w
-            if dk == 0:
-                for c in range(3):
-                    L_cam[i, c] = b[c] * le[c] * w
-            if record != RECORD_NONE and prev_rec[i] >= 0:
-                record_emission(prev_rec[i], record, b, le, w, prev_pdf[i], r_L0, r_direct, r_plight)
-
-        sf = surface_at(surf, p, b1[k], b2[k])  # the BSDF there, textures evaluated, and its frame
-        delta = write_aovs(sf, i, dk, cos_o, t[k], aov, aov_open)
-
-        # Continue past this vertex?
-        if max_depth >= 0 and dk + 1 >= max_depth:
+        # The records of a guide that learns: emission found along the last vertex's direction,
+        # then this vertex (also when the path ends here: its radiance is 0)
+        if v.found and prev_rec[i] >= 0:
+            record_emission(prev_rec[i], record, v.b, v.le, v.w, v.pdf, r_L0, r_direct, r_plight)
+        if not v.sampled:
             continue
-        wo = to_local((-wray[0], -wray[1], -wray[2]), sf.s, sf.t, sf.ns)
-        kk = key[i]  # the path's random stream
-
-        # Where the guide's map is (node, slot) and the mixing weight a (probability of BSDF sampling)
-        node = -1
-        slot = -1
-        a = 1.0
-        nf = ng if cos_o >= 0.0 else (-ng[0], -ng[1], -ng[2])  # normal on the side the path arrived
-        if not delta and (gs.res[0] > 0 or gs.pixel_slot.shape[0] > 0):
-            node, slot, a = locate(gs, x, nf, pix[i], dk)
-
-        # Next-event estimation (not at delta BSDFs)
-        if nee and not delta:
-            ok, so, sd, tmax, contrib = next_event(
-                sf, lt, surf.tri, x, ng, cos_o, wo, b, gs, slot, a, surf.eps[p],
-                surf.eps, draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
-                draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)), surf.mat_table)
-            if ok:
-                write_shadow(k, so, sd, tmax, contrib, sh_o, sh_d, sh_tmax, sh_L, has_shadow)
-
-        # The continuation from the mixture (the guide with probability 1 - a, else the BSDF), then
-        # possibly the end of the path by Russian roulette
-        nx = next_bounce(sf, gs, slot, a, wo, ng, cos_o, b, gain[i], dk, rr_depth, MAX_BOUNCES, ps, kk, i, surf.mat_table)
-        ok, wiw, wt, pdf, pbs, dlt, strategy = nx.ok, nx.wi, nx.weight, nx.pdf, nx.pdf_bsdf, nx.delta, nx.strategy
-        nb, gn = nx.beta, nx.gain
-
-        # Record the vertex for a guide that learns (also when the path ends here: its radiance is 0)
-        last = -1
-        if record != RECORD_NONE:
-            last = prev_rec[i]
-            prev_rec[i] = -1
-        if record != RECORD_NONE and not delta and not dlt and pdf > 0.0:
+        last = prev_rec[i]
+        prev_rec[i] = -1
+        if v.recorded:
             r = rec_base + k
             r_prev[r] = last
             prev_rec[i] = r
-            r_strategy[r] = strategy
-            r_node[r] = node
+            r_strategy[r] = v.strategy
+            r_node[r] = v.node
             r_path[r] = i
             r_pixel[r] = pix[i]
-            r_pdf[r] = pdf
-            r_pb[r] = pbs
-            r_fcos[r] = (0.2126 * wt[0] + 0.7152 * wt[1] + 0.0722 * wt[2]) * pdf
+            r_pdf[r] = v.pdf_mix
+            r_pb[r] = v.pdf_bsdf
+            r_fcos[r] = v.fcos
             r_direct[r] = 0.0
             r_plight[r] = 0.0
             for c in range(3):
-                r_x[r, c] = x[c]
-                r_n[r, c] = nf[c]
-                r_wi[r, c] = wiw[c]
+                r_x[r, c] = v.x[c]
+                r_n[r, c] = v.nf[c]
+                r_wi[r, c] = v.wi[c]
                 r_L0[r, c] = L[i, c]
-                r_beta[r, c] = nb[c] if ok else 0.0
-        if not ok:
-            continue
-
-        no = offset_point(x, ng, wiw, surf.eps[p])
-        for c in range(3):
-            beta[i, c] = nb[c]
-            next_o[k, c] = no[c]
-            next_d[k, c] = wiw[c]
-        depth[i] = dk + 1
-        prev_pdf[i] = pdf
-        prev_delta[i] = dlt
-        gain[i] = gn
-        alive[k] = True
+                r_beta[r, c] = v.beta[c]
 
 
 def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, direct=True, split=None):
@@ -241,6 +311,10 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
     limits = (ctx.max_depth, ctx.rr_depth, ctx.nee)
     state, out, shadow, queue = buf.path_state(), buf.continuation(), buf.shadow_rays(), buf.shadow_queue()
     t0 = stats.tick("camera", t0)
+    if thread_loop is not None and thread_loop.usable(ctx, record, splitting):
+        thread_loop.run(ctx, buf, n, ps, stats)
+        n_active = 0
+        t0 = time.perf_counter()
     for _ in range(MAX_BOUNCES + 1):
         if n_active == 0:
             break
@@ -304,3 +378,11 @@ class PathIntegrator(Integrator):
             p_entry["weight"] = weights[p_entry.pop("film")]
         report_dark(session.ctx.scene, image, st)
         return RenderResult(image, variance, aovs, st, session.final)
+
+
+try:  # the per-thread loop needs Embree (embreex); without it every wave takes the wavefront
+    from . import thread_loop
+except ImportError as err:
+    if not (err.name or "").startswith("embreex"):
+        raise
+    thread_loop = None
