@@ -66,6 +66,7 @@ def measure(path, accel, spp, max_depth, rr_depth, width, height, threads, repea
         "msamples_per_s_median": round(speeds[len(speeds) // 2], 3), "repeat": len(runs),
         "mrays_per_s": round(s["mrays_per_s"], 3), "rays_per_sample": round(s["rays"] / s["samples"], 2),
         "stages": {k: round(v, 3) for k, v in s["time_stages"].items()},
+        "trace_parts": {k: round(v, 3) for k, v in s["time_trace_parts"].items()},
     }
 
 
@@ -121,7 +122,8 @@ def vs_mitsuba(names, spp, max_depth, rr_depth, threads, repeat, width=None, hei
                          "height": first["height"], "spp": spp, "path_loop": loop, "ours": med(a), "mitsuba": med(b),
                          "ratio": med(a) / med(b), "ours_runs": a, "mitsuba_runs": b,
                          "rays_per_sample": round(mid["rays"] / mid["samples"], 3),
-                         "stages": {k: round(v, 3) for k, v in mid["stages"].items()}})
+                         "stages": {k: round(v, 3) for k, v in mid["stages"].items()},
+                         "trace_parts": {k: round(v, 3) for k, v in mid["trace_parts"].items()}})
             print(f"{name} ({first['triangles']} triangles, {first['width']}x{first['height']}, {spp} spp), "
                   f"path loop {loop}: ours {med(a):.2f} Msamples/s, Mitsuba {med(b):.2f}: {med(a) / med(b):.2f}x "
                   f"(medians of {len(a)} alternated runs in separate processes; ours {min(a):.2f}-{max(a):.2f}, "
@@ -242,6 +244,9 @@ def main(argv=None):
               f"{row['msamples_per_s_median']:.3f}), {row['mrays_per_s']:.2f} Mrays/s, "
               f"{row['rays_per_sample']} rays/sample, {row['seconds']:.2f} s")
         print(f"    {parts}")
+        if st.get("trace", 0.0) > 0:
+            print("    trace by step (cycle shares): "
+                  + ", ".join(f"{k} {v:.2f}s" for k, v in row["trace_parts"].items()))
     stage_table([r for r in rows if "accel" in r])
     if a.json:
         os.makedirs(os.path.dirname(os.path.abspath(a.json)), exist_ok=True)

@@ -31,7 +31,7 @@ def _ours(job):
     def render(seed):
         st = tracer.render(scene, seed=seed, **kw).stats
         return {"seconds": st["time_render"], "samples": st["samples"], "stages": st["time_stages"],
-                "rays": st["rays"], "shadow_rays": st["shadow_rays"]}
+                "trace_parts": st["time_trace_parts"], "rays": st["rays"], "shadow_rays": st["shadow_rays"]}
 
     return render, {"triangles": scene.n_triangles, "width": scene.width, "height": scene.height}
 

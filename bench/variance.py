@@ -42,7 +42,7 @@ def downsample(img, s):
     return img[: h * s, : w * s].reshape(h, s, w, s, -1).mean(axis=(1, 3))
 
 
-def measure(scene, ref, method, spp, seeds, train_spp):
+def measure(scene, ref, method, spp, seeds, train_spp, path_loop="thread"):
     """Per-seed (relative variance, render seconds per spp) of `method` (GUIDE[:K=V,...][/INTEGRATOR
     [:K=V,...]], bench.common.render_args) on `scene`, frozen after training if a guide."""
     args = render_args(method)
@@ -54,7 +54,7 @@ def measure(scene, ref, method, spp, seeds, train_spp):
         guide = FrozenGuide(g)
     out = []
     for s in range(seeds):
-        r = tracer.render(scene, spp=spp, guide=guide, seed=1000 + s, **args)
+        r = tracer.render(scene, spp=spp, guide=guide, seed=1000 + s, path_loop=path_loop, **args)
         out.append((relative_variance(r.film, ref, spp), r.stats["time_total"] / spp))
     return out
 
@@ -76,6 +76,7 @@ def main(argv=None):
     p.add_argument("--seeds", type=int, default=5)
     p.add_argument("--scale", type=int, default=2, help="render at 1/scale of the scene's resolution")
     p.add_argument("--scene-dir", default=None)
+    p.add_argument("--path-loop", default="thread", help="the frozen renders' path loop: thread or wave (render())")
     a = p.parse_args(argv)
     methods = [m.strip() for m in a.methods.split(";" if ";" in a.methods else ",") if m.strip()]
     base_method = next((m for m in methods if m.partition("/")[0] == "bsdf"), None)
@@ -97,7 +98,7 @@ def main(argv=None):
         scene = tracer.load_scene(path, width=full.shape[1] // a.scale, height=full.shape[0] // a.scale)
         base = base_t = None
         for m in methods:
-            vals, secs = zip(*measure(scene, ref, m, a.spp, a.seeds, a.train_spp))
+            vals, secs = zip(*measure(scene, ref, m, a.spp, a.seeds, a.train_spp, a.path_loop))
             mean, sem, lo, hi = summarise(vals)
             t = float(np.median(secs))
             if m == base_method:

@@ -336,6 +336,7 @@ def _stats(scene, stats, passes, spp, t_setup, t_start, t_render, settings, t_co
         "time_total": now - t_start,  # what a time budget counts: set-up, learning, passes, solve
         "time_render": elapsed,  # from the first pass on (what Msamples/s divide by)
         "time_stages": dict(stats.time),
+        "time_trace_parts": dict(stats.trace_parts),
         "msamples_per_s": samples / elapsed / 1e6 if elapsed > 0 else 0.0,
         "mrays_per_s": rays / elapsed / 1e6 if elapsed > 0 else 0.0,
         "nonfinite_samples": int(stats.nonfinite),

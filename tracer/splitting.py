@@ -44,7 +44,7 @@ WINDOW_MIN_SURVIVAL = 0.05  # the weight window's roulette keeps a path with at 
 
 
 @jit(inline="always")
-def _split_count(k, active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing, pixel_est,
+def split_count(k, active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing, pixel_est,
                  hi, low, threshold):
     """split_counts for entry k; after the window's roulette it divides its path's beta and gain."""
     i = active[k]
@@ -91,7 +91,7 @@ def split_counts(active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth
     wanted = 0
     ended = 0
     for k in prange(active.shape[0]):
-        m = _split_count(k, active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing,
+        m = split_count(k, active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing,
                          pixel_est, hi, low, threshold)
         ks[k] = m
         wanted += m

@@ -225,6 +225,9 @@ class Stats:
 
     def __init__(self):
         self.time = {s: 0.0 for s in self.STAGES}
+        # the per-thread loop's "trace" seconds split by step (integrators.thread_loop.TRACE_PARTS),
+        # in proportion to the processor cycles each took
+        self.trace_parts = {s: 0.0 for s in ("intersect", "shade", "occluded", "rest")}
         self.rays = 0
         self.shadow_rays = 0
         self.samples = 0

@@ -29,6 +29,7 @@ import numba
 import numpy as np
 from llvmlite import ir
 from numba import prange, types
+from numba.core import cgutils
 from numba.extending import intrinsic
 
 from tracer._jit import jit, kernel
@@ -86,6 +87,19 @@ def _load_library():
 _LIB = _load_library()
 _INTERSECT16 = ctypes.cast(_LIB.rtcIntersect16, ctypes.c_void_p).value
 _OCCLUDED16 = ctypes.cast(_LIB.rtcOccluded16, ctypes.c_void_p).value
+
+
+@intrinsic
+def cycles(typingctx):
+    """The processor's cycle counter (llvm.readcyclecounter: rdtsc on x86), for per-stage shares."""
+    sig = types.int64()
+
+    def codegen(context, builder, signature, args):
+        fnty = ir.FunctionType(ir.IntType(64), [])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.readcyclecounter")
+        return builder.call(fn, [])
+
+    return sig, codegen
 
 
 @intrinsic
@@ -181,7 +195,7 @@ def _refine(plane, p, o, d, t, b1, b2, i):
     b2[i] = u2
 
 
-@jit
+@jit(inline="always")
 def clear_packet(ib):
     """Mark every lane of the packet in scratch row `ib` (int32 view) invalid, with no hit."""
     L = _LANES
@@ -192,7 +206,7 @@ def clear_packet(ib):
         ib[19 * L + k] = -1
 
 
-@jit
+@jit(inline="always")
 def read_hit(buf, ib, k, refine, plane, org, dirs, t, prim, b1, b2, i):
     """Closest hit of lane k after rtcIntersect16, for ray i of org, dirs: into t, prim, b1, b2[i]
     (left as they are where the lane was invalid or missed), refined in float64 if `refine`."""
@@ -211,7 +225,7 @@ def read_hit(buf, ib, k, refine, plane, org, dirs, t, prim, b1, b2, i):
         b2[i] = buf[16 * L + k]
 
 
-@jit
+@jit(inline="always")
 def lane_occluded(buf, ib, k):
     """Whether lane k's shadow ray was blocked, after rtcOccluded16 (an invalid lane never is)."""
     # Embree sets tfar to -inf when something blocks the ray

@@ -311,8 +311,8 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
     limits = (ctx.max_depth, ctx.rr_depth, ctx.nee)
     state, out, shadow, queue = buf.path_state(), buf.continuation(), buf.shadow_rays(), buf.shadow_queue()
     t0 = stats.tick("camera", t0)
-    if thread_loop is not None and thread_loop.usable(ctx, record, splitting):
-        thread_loop.run(ctx, buf, n, ps, stats)
+    if thread_loop is not None and thread_loop.usable(ctx, record):
+        thread_loop.run(ctx, buf, n, ps, stats, split if splitting else None)
         n_active = 0
         t0 = time.perf_counter()
     for _ in range(MAX_BOUNCES + 1):
