@@ -83,7 +83,7 @@ def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
         "time_budget": time_budget, "spp": s["spp"], "samples": s["samples"],
         "time_total": s["time_total"], "time_learning": learning, "update_s": update, "inference_s": inference,
         "time_rendering": s["time_total"] - learning - update - inference,
-        "shade_s": s["time_stages"]["shade"],
+        "shade_s": s["time_stages"]["shade"] + s["time_trace_parts"]["shade"],  # wavefront + per-thread loop
         "solve_s": s.get("time_solve", 0.0),
         "guide_memory_bytes": s.get("guide_memory_bytes", 0),
         "settings": {k: s[k] for k in ("max_depth", "rr_depth", "accel", "threads", "pixel_filter")},

@@ -4,17 +4,22 @@
     python -m bench.throughput --scenes ../shared/scenes/veach-ajar/scene.obj --spp 16
     python -m bench.throughput --scenes open-1k,open-1m --accels embree --spp 64
     python -m bench.throughput --vs-mitsuba          # side by side with Mitsuba 3 (optional extra)
+    python -m bench.throughput --vs-mitsuba --scenes staircase --width 320 --height 180 --path-loops thread,wave
     python -m bench.throughput --load                # load_scene of the 1.3M-triangle OBJ: time, peak RSS
     python -m bench.throughput --json bench/results/throughput.json
 
 Scene names besides paths (bench.scenes, written on first use into bench/results/scenes):
-`open-1k` and `open-1m` (an icosphere of 1280 or 1.31M triangles on a floor under a quad light)
-and `mitsuba-cornell` (Mitsuba's own Cornell box exported to OBJ; needs mitsuba).
+`open-1k` and `open-1m` (an icosphere of 1280 or 1.31M triangles on a floor under a quad light),
+`mitsuba-cornell` (Mitsuba's own Cornell box exported to OBJ; needs mitsuba) and `staircase` (the
+shared Mitsuba scene XML, ../shared/scenes-mitsuba). `--path-loops thread,wave` measures our
+renders through the per-thread loop and the wavefront (render(path_loop=...)); the per-thread
+loop's time is split by step (intersect, shade, occluded, rest) from processor-cycle shares.
 
 Each scene is rendered once untimed (compiles, warms caches), then timed `--repeat` times; the
 fastest run is reported with the median beside it (shared 2-core machines vary by +-15% from
-run to run). With --vs-mitsuba, each scene is loaded in both renderers, each renders once
-untimed, then the two alternate `--repeat` times; the ratio is of the medians. Mitsuba's LLVM
+run to run). With --vs-mitsuba, each renderer (ours once per path loop) runs in a process of its
+own (bench.throughput_worker), loads the scene and renders once untimed, then they alternate
+`--repeat` times; the ratio is of the medians. Mitsuba's LLVM
 backend needs a recent libLLVM (Dr.Jit aborts with LLVM 14 or 15): point DRJIT_LIBLLVM_PATH at one.
 """
 import argparse

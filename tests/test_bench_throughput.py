@@ -43,3 +43,21 @@ def test_throughput_rows(tmp_path, monkeypatch, capsys):
     assert rows[0]["rays_per_sample"] == rows[1]["rays_per_sample"]
     assert rows[0]["stages"]["intersect"] == 0 and rows[0]["stages"]["shade"] == 0
     assert rows[1]["stages"]["trace"] == 0
+
+
+def test_worker_renders_in_its_own_process(tmp_path, monkeypatch):
+    """bench.throughput --vs-mitsuba's worker protocol, our side: the child loads the scene, says
+    it is ready with the scene's size, then renders once per seed sent, and each reply counts
+    the samples the job asked for (16 x 16 x 2) and the rays its render traced."""
+    monkeypatch.setattr(scenes, "FOLDER", str(tmp_path))
+    spec = scenes.open_scene(1)
+    job = dict(scene=spec["obj"], spp=2, max_depth=4, rr_depth=3, width=16, height=16, threads=1, path_loop="thread")
+    w = throughput._Worker("ours", job)
+    try:
+        assert (w.info["width"], w.info["height"], w.info["triangles"]) == (16, 16, 84)
+        for seed in (0, 1):
+            r = w.render(seed)
+            assert r["samples"] == 16 * 16 * 2 and r["rays"] >= r["samples"] and r["seconds"] > 0
+            assert r["stages"]["trace"] > 0 and r["stages"]["intersect"] == 0
+    finally:
+        w.close()

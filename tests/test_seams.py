@@ -325,6 +325,7 @@ def test_kernel_parameters_follow_their_bundles():
     from tracer.gradient.offsets import BaseBounce, NeeTerms, Offsets, shift_offsets, start_offsets
     from tracer.guiding.records import Records
     from tracer.integrators.path import shade
+    from tracer.integrators.thread_loop import trace_paths
     from tracer.wave import Continuation, PathState, ShadowQueue, ShadowRays, compact
 
     surf = ["surf"]  # material.Surfaces travels whole: the kernels only read it
@@ -333,6 +334,7 @@ def test_kernel_parameters_follow_their_bundles():
     nee = _names(NeeTerms, "n_", {"vis_b": "vis_b", "vis": "vis"})
     expected = {
         shade: [surf, _names(PathState), _names(Continuation), shadow, _names(Records, "r_")],
+        trace_paths: [surf, _names(PathState)],
         compact: [_names(Continuation), shadow, _names(ShadowQueue, "sp_")],
         shade_hybrid: [surf, _names(PathState), _names(Continuation), shadow, _names(BaseBounce, "b_"), offsets, nee],
         shift_offsets: [surf, _names(BaseBounce, "b_"), offsets],

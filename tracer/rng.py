@@ -111,10 +111,18 @@ class PrimarySamples(NamedTuple):
     u: np.ndarray
 
 
+_NONE_SUPPLIED = None
+
+
 def no_primary_samples():
-    """What a source without external samples passes: None (every dimension from the stream; the
-    kernels are compiled for it apart, so the seam costs the camera nothing)."""
-    return None
+    """What a source without external samples passes: a PrimarySamples that supplies no dimension
+    (every one from the stream). It has the type of one that does, so every kernel that takes ps
+    compiles once (a kernel's compile costs up to a minute), for the price of one comparison per
+    random number."""
+    global _NONE_SUPPLIED
+    if _NONE_SUPPLIED is None:
+        _NONE_SUPPLIED = PrimarySamples(np.zeros(0, np.int64), np.zeros((0, 0)))
+    return _NONE_SUPPLIED
 
 
 def primary_samples(u, dims):
