@@ -8,7 +8,11 @@ which go to the accel (Embree or the Numba BVH) in one batch per stage:
     -> shade: emission (MIS), NEE sample, direction from the mixture, record, roulette
     -> compact -> [occluded] -> add NEE -> repeat -> sink (film, or the caller's samples)
 
-The steps of `shade` are the helpers of tracer.shading; its random numbers go through the sample
+A wave that records nothing takes the per-thread path loop instead (tracer.integrators.
+thread_loop, Embree only): the same stages per packet of 16 paths inside one kernel. Both shade
+a vertex with `shade_vertex`, so their images are the same bit for bit.
+
+The steps of `shade_vertex` are the helpers of tracer.shading; its random numbers go through the sample
 seam `rng.draw` (the stream, or a source's external primary samples). With a guide, a non-delta
 vertex asks it where its map is (`guiding.contract.locate`: a voxel's map, or a per-pixel map at
 the first bounce) and draws its direction from the one-sample MIS mixture p = a p_bsdf + (1 - a)
