@@ -112,6 +112,23 @@ def _copy_entry(k, e, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d):
         ray_d[e, c] = ray_d[k, c]
 
 
+@jit(inline="always")
+def make_copy(i, s, j, beta, gain, L, depth, prev_pdf, prev_delta, key, pix, prev_rec, parent):
+    """Path slot s becomes copy j (>= 1) of path i, at its current vertex: i's throughput and gain
+    (already divided among the copies), no radiance yet, its own key, and parent i."""
+    for c in range(3):
+        beta[s, c] = beta[i, c]
+        L[s, c] = 0.0
+    gain[s] = gain[i]
+    depth[s] = depth[i]
+    prev_pdf[s] = prev_pdf[i]
+    prev_delta[s] = prev_delta[i]
+    key[s] = split_key(key[i], depth[i], j)
+    pix[s] = pix[i]
+    prev_rec[s] = -1
+    parent[s] = i
+
+
 @jit
 def split_paths(active, ks, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d, beta, gain, L, depth, prev_pdf,
                 prev_delta, key, pix, prev_rec, parent, n_slots, capacity):
@@ -146,17 +163,7 @@ def split_paths(active, ks, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d, 
         for j in range(1, m):
             active[e] = s
             _copy_entry(k, e, t2, prim2, b12, b22, t2, prim2, b12, b22, ray_o, ray_d)
-            for c in range(3):
-                beta[s, c] = beta[i, c]
-                L[s, c] = 0.0
-            gain[s] = gain[i]
-            depth[s] = depth[i]
-            prev_pdf[s] = prev_pdf[i]
-            prev_delta[s] = prev_delta[i]
-            key[s] = split_key(key[i], depth[i], j)
-            pix[s] = pix[i]
-            prev_rec[s] = -1
-            parent[s] = i
+            make_copy(i, s, j, beta, gain, L, depth, prev_pdf, prev_delta, key, pix, prev_rec, parent)
             e += 1
             s += 1
     return e, s

@@ -26,8 +26,7 @@ from .._jit import kernel
 from ..bvh.embree import (_INTERSECT16, _LANES, _OCCLUDED16, _VALID, call4, clear_packet, cycles,
                           lane_occluded, load_lane, read_hit)
 from ..bvh.numba_bvh import _NumbaThreads
-from ..rng import split_key
-from ..splitting import split_count, throughput_plan
+from ..splitting import make_copy, split_count, throughput_plan
 from .path import shade_vertex
 
 _NO_SPLIT = throughput_plan(0.0)
@@ -173,19 +172,10 @@ def trace_paths(fi, fo, scene, plane, centre, refine, scratch, ray_o, ray_d, sur
                         sl = used
                         used += 1
                         copies += 1
+                        make_copy(i, sl, j, beta, gain, L, depth, prev_pdf, prev_delta, key, pix, prev_rec, parent)
                         for q in range(3):
-                            beta[sl, q] = beta[i, q]
-                            L[sl, q] = 0.0
                             q_o[waiting, q] = o[k, q]
                             q_d[waiting, q] = d[k, q]
-                        gain[sl] = gain[i]
-                        depth[sl] = depth[i]
-                        prev_pdf[sl] = prev_pdf[i]
-                        prev_delta[sl] = prev_delta[i]
-                        key[sl] = split_key(key[i], depth[i], j)
-                        pix[sl] = pix[i]
-                        prev_rec[sl] = -1
-                        parent[sl] = i
                         q_slot[waiting] = sl
                         q_t[waiting] = t[k]
                         q_prim[waiting] = prim[k]
