@@ -20,6 +20,7 @@ from ._jit import kernel
 from .film import N_AOV
 from .guiding.records import Records
 
+TRACE_PARTS = ("intersect", "shade", "occluded", "rest")  # Stats.trace_parts: the per-thread loop's steps
 _CHUNKS = 64  # compaction splits a batch into this many chunks, counted then written in parallel
 
 
@@ -225,9 +226,9 @@ class Stats:
 
     def __init__(self):
         self.time = {s: 0.0 for s in self.STAGES}
-        # the per-thread loop's "trace" seconds split by step (integrators.thread_loop.TRACE_PARTS),
-        # in proportion to the processor cycles each took
-        self.trace_parts = {s: 0.0 for s in ("intersect", "shade", "occluded", "rest")}
+        # the per-thread loop's "trace" seconds split by step, in proportion to the processor
+        # cycles each took (integrators.thread_loop)
+        self.trace_parts = {s: 0.0 for s in TRACE_PARTS}
         self.rays = 0
         self.shadow_rays = 0
         self.samples = 0

@@ -364,6 +364,11 @@ class EmbreeAccel:
                 _occluded(_OCCLUDED16, self._scene, self.centre, org, dirs, tmax, self._rows, out)
         return out
 
+    def packet_args(self):
+        """(scene, plane table, centre, refine, scratch rows): what a kernel that makes its own
+        rtcIntersect16 / rtcOccluded16 calls needs (tracer.integrators.thread_loop)."""
+        return self._scene, self._plane, self.centre, self.refine, self._rows
+
     def __repr__(self):
         return (f"EmbreeAccel(name='embree', triangles={self.n_triangles}, "
                 f"threads={self.threads}, scale={self.scale:.4g})")

@@ -27,12 +27,12 @@ from ..bvh.embree import (_INTERSECT16, _LANES, _OCCLUDED16, _VALID, call4, clea
                           lane_occluded, load_lane, read_hit)
 from ..bvh.numba_bvh import _NumbaThreads
 from ..splitting import make_copy, split_count, throughput_plan
+from ..wave import TRACE_PARTS
 from .path import shade_vertex
 
 _NO_SPLIT = throughput_plan(0.0)
 
 
-TRACE_PARTS = ("intersect", "shade", "occluded", "rest")  # stats.trace_parts: the loop's wall time by step
 COUNTS = 8  # counts' columns: rays, shadow rays, cycles of intersect, shade, occluded and all, copies, ended
 
 
@@ -251,11 +251,11 @@ def run(ctx, buf, n, ps, stats, split=None):
     splitting them by the splitting.SplitPlan `split` (None: never; buf made with split=True)."""
     accel = ctx.accel
     t0 = time.perf_counter()
-    counts = np.zeros((accel._rows.shape[0], COUNTS), np.int64)
+    packet = accel.packet_args()
+    counts = np.zeros((packet[-1].shape[0], COUNTS), np.int64)
     plan = split if split is not None else _NO_SPLIT
     with _NumbaThreads(accel.threads):
-        trace_paths(_INTERSECT16, _OCCLUDED16, accel._scene, accel._plane, accel.centre, accel.refine, accel._rows,
-                    buf.ray_o[:n], buf.ray_d[:n], ctx.surfaces, ctx.lights, ctx.guide_state, ps,
+        trace_paths(_INTERSECT16, _OCCLUDED16, *packet, buf.ray_o[:n], buf.ray_d[:n], ctx.surfaces, ctx.lights, ctx.guide_state, ps,
                     ctx.max_depth, ctx.rr_depth, ctx.nee, *buf.path_state(), split is not None, plan.outgoing,
                     plan.pixel_est, plan.hi, plan.low, plan.threshold, buf.parent, buf.capacity, counts)
     stats.rays += int(counts[:, 0].sum())
