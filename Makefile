@@ -14,7 +14,7 @@ $(BIN)/python:
 
 $(VENV)/.installed: $(BIN)/python pyproject.toml
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e ".[test,bench,learn,mitsuba]"
+	$(BIN)/pip install --quiet -e ".[test,bench,learn,mitsuba,denoise]"
 	touch $@
 
 setup: $(VENV)/.installed

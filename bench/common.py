@@ -48,10 +48,16 @@ def method_spec(method):
     return parse_spec(method)
 
 
+DENOISED = "+oidn"  # a method with this suffix: its final image denoised (render(denoise=True))
+
+
 def render_args(method):
     """render() keyword arguments of a bench method: a named gradient-domain one (GRADIENT_METHODS),
     or GUIDE[:KEY=VALUE,...][/INTEGRATOR[:KEY=VALUE,...]] (tracer.methods' spec grammar, e.g.
-    'photon', 'photon:sigma=2/gpt:shift=replay', 'bsdf/path:nee=0')."""
+    'photon', 'photon:sigma=2/gpt:shift=replay', 'bsdf/path:nee=0'); either with `+oidn` after it
+    ('bsdf+oidn', 'gpt-l1+oidn'): the same, denoised by Open Image Denoise in its time budget."""
+    if method.endswith(DENOISED):
+        return dict(render_args(method[:-len(DENOISED)]), denoise=True)
     if method in GRADIENT_METHODS:
         return {k: (dict(v) if isinstance(v, dict) else v) for k, v in GRADIENT_METHODS[method].items()}
     guide, _, integrator = method.partition("/")
@@ -65,6 +71,12 @@ def render_args(method):
 def check_method(method):
     """Fail before rendering on an unknown method, guide, integrator or setting, or a guide the
     integrator cannot run with."""
+    if method.endswith(DENOISED):
+        from tracer.denoise import available
+
+        if not available():
+            raise SystemExit(f"bench: {method} needs Intel Open Image Denoise: pip install -e \".[denoise]\"")
+        method = method[:-len(DENOISED)]
     if method.startswith("gpt") and method not in GRADIENT_METHODS:
         raise SystemExit(f"bench: unknown gradient method {method!r}; valid: " + ", ".join(GRADIENT_METHODS)
                          + " (or GUIDE/gpt:KEY=VALUE,...)")

@@ -53,10 +53,19 @@ import numpy as np
 import tracer
 from tracer import metrics
 from . import atomic
-from .common import GRADIENT_METHODS, check_method, method_spec, reference_for, render_args, scene_path  # noqa: F401
+from . import sweep as sweep_module
+from tracer.guiding import guide_names
+from .common import DENOISED, GRADIENT_METHODS, check_method, method_spec, reference_for, render_args, scene_path  # noqa: F401
+from . import common
 from .reference import ROOT
+from .reference import load as load_reference
 
 DEFAULT_OUT = os.path.join(ROOT, "bench", "results", "convergence")
+# `--methods all`: every registered guide with the path tracer, the gradient-domain tracer with each
+# reconstruction, and each of them denoised
+_BASE_METHODS = tuple(guide_names()) + ("gpt-l1", "gpt-l2", "gpt-gradnet")
+ALL_METHODS = _BASE_METHODS + tuple(m + DENOISED for m in _BASE_METHODS)
+CHART_METRICS = ("relMSE", "1-SSIM")  # where denoisers and learned reconstructions differ: the second
 
 
 # guide statistics a record keeps (pss: the chosen model and the share of zero-valued samples;
@@ -66,15 +75,18 @@ GUIDE_STATS = ("m", "layers", "width", "parameters", "val_nll", "epochs", "fallb
                "pixels_guided", "pixels", "window", "centre_sparsity", "initial_lit")
 
 
-def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
-    r = tracer.render(scene, spp=spp, time=time_budget, seed=seed, **render_args(method))
+def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None, threads=None):
+    """Render `method` once and score it against `ref`: its record (a denoised method is scored on
+    its denoised image, which is the one stored)."""
+    r = tracer.render(scene, spp=spp, time=time_budget, seed=seed, threads=threads, **render_args(method))
+    final = r.image if r.denoised is None else r.denoised
     s = r.stats
     image = None
     if images:
         os.makedirs(images, exist_ok=True)
         tag = method.replace(":", "_").replace(",", "_").replace("=", "-").replace("/", "+")
         image = f"{tag}_{'t%g' % time_budget if time_budget else 'spp%d' % spp}_s{seed}.npy"
-        atomic.save_npy(os.path.join(images, image), r.image.astype(np.float32))
+        atomic.save_npy(os.path.join(images, image), final.astype(np.float32))
     learning = s.get("guide_time_learning", 0.0)
     update = s.get("guide_time_update", 0.0)
     inference = s.get("guide_time_inference", 0.0)
@@ -82,20 +94,22 @@ def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None):
         "method": method, "seed": seed, "budget": "time" if time_budget else "spp",
         "time_budget": time_budget, "spp": s["spp"], "samples": s["samples"],
         "time_total": s["time_total"], "time_learning": learning, "update_s": update, "inference_s": inference,
-        "time_rendering": s["time_total"] - learning - update - inference,
+        "time_rendering": s["time_total"] - learning - update - inference - s.get("time_denoise", 0.0),
         "shade_s": s["time_stages"]["shade"] + s["time_trace_parts"]["shade"],  # wavefront + per-thread loop
         "solve_s": s.get("time_solve", 0.0),
         "guide_memory_bytes": s.get("guide_memory_bytes", 0),
         "settings": {k: s[k] for k in ("max_depth", "rr_depth", "accel", "threads", "pixel_filter")},
-        "metrics": metrics.all_metrics(r.image, ref),
+        "metrics": metrics.all_metrics(final, ref),
         "nonfinite_samples": s["nonfinite_samples"],
+        "time_denoise": s.get("time_denoise", 0.0),
+        "nonfinite_denoised": s.get("nonfinite_denoised", 0),
         "image": image,
         "guide_stats": {k: v for k, v in s.get("guide_stats", {}).items() if k in GUIDE_STATS},
     }
 
 
-def _band(records, method, x_key):
-    """x values and (median, min, max) of relMSE over seeds, per x (grouped by budget).
+def _band(records, method, x_key, metric="relMSE"):
+    """x values and (median, min, max) of `metric` over seeds, per x (grouped by budget).
 
     Against spp, a method run at spp budgets is plotted at those; one run only at time budgets
     (bsdf, whose time runs define the default spp budgets) at the median spp of each time budget."""
@@ -112,12 +126,15 @@ def _band(records, method, x_key):
         rs = groups[key]
         x = (key if by_spp else
              np.median([r["time_total"] if x_key == "time" else r["spp"] for r in rs]))
-        e = [r["metrics"]["relMSE"] for r in rs]
+        e = [r["metrics"].get(metric, np.nan) for r in rs]
         xs.append(x), med.append(np.median(e)), lo.append(min(e)), hi.append(max(e))
     return np.array(xs), np.array(med), np.array(lo), np.array(hi)
 
 
-def chart(records, scene, methods, x_key, path):
+def chart(records, scene, methods, x_key, path, floor=None):
+    """One PNG: relMSE and 1-SSIM (CHART_METRICS) against wall time or spp, log-log, a line per
+    method (median over seeds, band from min to max; denoised methods dashed), the reference's
+    noise floor as a grey line on the relMSE panel."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -125,33 +142,65 @@ def chart(records, scene, methods, x_key, path):
 
     from matplotlib.ticker import NullFormatter, ScalarFormatter
 
-    fig, ax = plt.subplots(figsize=(5, 3.6), dpi=110)
-    ticks = set()
-    for m in methods:
-        x, med, lo, hi = _band(records, m, x_key)
-        if len(x) == 0:
-            continue
-        # the budgets as ticks (a run's measured time is a little off its budget: 40 and 41)
-        if x_key == "time":
-            ticks.update(float(r["time_budget"]) for r in records if r["method"] == m and r["budget"] == "time")
-        else:
-            ticks.update(float(f"{v:.2g}") for v in x)
-        ax.plot(x, med, marker="o", label=m)
-        ax.fill_between(x, lo, hi, alpha=0.2)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    if ticks:  # the budgets themselves as plain numbers, not crowded minor labels
-        ax.set_xticks(sorted(ticks))
-        ax.xaxis.set_major_formatter(ScalarFormatter())
-        ax.xaxis.set_minor_formatter(NullFormatter())
-    ax.set_xlabel("wall time [s]" if x_key == "time" else "samples per pixel")
-    ax.set_ylabel("relMSE")
-    ax.set_title(f"{scene}: relMSE vs {'time' if x_key == 'time' else 'spp'}")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
+    fig, axes = plt.subplots(1, len(CHART_METRICS), figsize=(10, 4.2), dpi=110)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    base = [m for m in methods if not m.endswith(DENOISED)]
+    for ax, metric in zip(axes, CHART_METRICS):
+        ticks = set()
+        for m in methods:
+            x, med, lo, hi = _band(records, m, x_key, metric)
+            if len(x) == 0:
+                continue
+            # the budgets as ticks (a run's measured time is a little off its budget: 40 and 41)
+            if x_key == "time":
+                ticks.update(float(r["time_budget"]) for r in records if r["method"] == m and r["budget"] == "time")
+            else:
+                ticks.update(float(f"{v:.2g}") for v in x)
+            raw = m[:-len(DENOISED)] if m.endswith(DENOISED) else m
+            colour = colours[(base.index(raw) if raw in base else methods.index(m)) % len(colours)]
+            ax.plot(x, med, marker="o", ms=3, label=m, color=colour, ls="--" if m.endswith(DENOISED) else "-")
+            ax.fill_between(x, lo, hi, alpha=0.12, color=colour)
+        if metric == "relMSE" and floor:
+            ax.axhline(floor, color="grey", lw=1, ls=":", label="reference's noise floor")
+        ax.set_xscale("log")
+        if any(line.get_ydata().max(initial=0.0) > 0 for line in ax.get_lines()):
+            ax.set_yscale("log")
+        if ticks:  # the budgets themselves as plain numbers, not crowded minor labels
+            ax.set_xticks(sorted(ticks))
+            ax.xaxis.set_major_formatter(ScalarFormatter())
+            ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel("wall time [s]" if x_key == "time" else "samples per pixel")
+        ax.set_ylabel(metric)
+        ax.set_title(f"{scene}: {metric} vs {'time' if x_key == 'time' else 'spp'}")
+        ax.grid(True, which="both", alpha=0.3)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="center right", fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0, 0.83, 1))
     atomic.write(path, fig.savefig)
     plt.close(fig)
+
+
+def best_table(all_records, scenes, times):
+    """Lines of the table on top of the summary: per scene and time budget, the method with the
+    lowest mean relMSE and the one with the lowest mean 1-SSIM over seeds."""
+    if not times:
+        return []
+    lines = ["Best method per scene and time budget (mean over seeds), by relMSE / by 1-SSIM:", "",
+             "| scene | " + " | ".join(f"{t:g} s" for t in times) + " |", "|---|" + "---|" * len(times)]
+    for scene in scenes:
+        cells = []
+        for t in times:
+            recs = [r for r in all_records if r["scene"] == scene and r["budget"] == "time" and r["time_budget"] == t]
+            best = []
+            for metric in CHART_METRICS:
+                means = {}
+                for r in recs:
+                    if r["metrics"].get(metric) is not None:
+                        means.setdefault(r["method"], []).append(r["metrics"][metric])
+                best.append(min(means, key=lambda m: np.mean(means[m])) if means else "-")
+            cells.append(" / ".join(best))
+        lines.append(f"| {scene} | " + " | ".join(cells) + " |")
+    return lines + [""]
 
 
 def floor_check(records, floor):
@@ -200,32 +249,21 @@ def _cell(v, fmt):
 
 def summary_table(all_records, scenes, methods, times, floors):
     lines = [f"# Convergence summary ({platform.machine()}, {os.cpu_count()} cores)", "",
-             "relMSE at equal wall time, mean over seeds; ratio to `bsdf` in brackets (< 1 is better).",
+             "Errors at equal wall time and at equal spp, mean over seeds; ratio to `bsdf` in brackets (< 1 is better).",
              "Reference check: its noise floor (expected relMSE of the reference itself) must be below a",
-             "tenth of the smallest relMSE it judged.", ""]
+             "tenth of the smallest relMSE it judged.", ""] + best_table(all_records, scenes, times)
     for scene in scenes:
         ok, smallest = floor_check([r for r in all_records if r["scene"] == scene], floors[scene])
         recs = [r for r in all_records if r["scene"] == scene and r["budget"] == "time"]
         lines += [f"## {scene}", "",
                   f"Reference: noise floor {floors[scene]:.3g}, smallest error judged {smallest:.3g}: "
                   + ("good enough." if ok else "**too noisy: extend it with `bench.reference --append`**."), ""]
-        if times:
-            lines += ["| method | " + " | ".join(f"{t:g} s" for t in times) + " |", "|---|" + "---|" * len(times)]
+        for metric in (CHART_METRICS if times else ()):
+            lines += [f"{metric} at equal time:", "",
+                      "| method | " + " | ".join(f"{t:g} s" for t in times) + " |", "|---|" + "---|" * len(times)]
+            lines += _time_rows(recs, methods, times, metric) + [""]
         base = {t: np.mean([r["metrics"]["relMSE"] for r in recs if r["method"] == "bsdf" and r["time_budget"] == t]
                            or [np.nan]) for t in times}
-        for m in (methods if times else []):
-            cells = []
-            for t in times:
-                e = [r["metrics"]["relMSE"] for r in recs if r["method"] == m and r["time_budget"] == t]
-                if not e:
-                    cells.append("-")
-                    continue
-                v = float(np.mean(e))
-                ratio = v / base[t] if base[t] and np.isfinite(base[t]) else np.nan
-                cells.append(f"{v:.3g} ({ratio:.2f})" if np.isfinite(ratio) else f"{v:.3g}")
-            lines.append(f"| {m} | " + " | ".join(cells) + " |")
-        if times:
-            lines.append("")
         lines += spp_table([r for r in all_records if r["scene"] == scene and r["budget"] == "spp"], methods)
         guided = [m for m in methods if m != "bsdf"] if times else []
         corrected = []
@@ -263,6 +301,27 @@ def summary_table(all_records, scenes, methods, times, floors):
                                  f"{max(r['guide_memory_bytes'] for r in rr) / 1e6:.0f} |")
             lines.append("")
     return "\n".join(lines)
+
+
+def _time_rows(recs, methods, times, metric):
+    """Table rows of `metric` at each time budget: mean over seeds, ratio to bsdf in brackets."""
+    def values(m, t):
+        return [r["metrics"][metric] for r in recs if r["method"] == m and r["time_budget"] == t
+                and r["metrics"].get(metric) is not None]
+
+    base = {t: np.mean(values("bsdf", t) or [np.nan]) for t in times}
+    rows = []
+    for m in methods:
+        cells = []
+        for t in times:
+            e = values(m, t)
+            if not e:
+                cells.append("-")
+                continue
+            v = float(np.mean(e))
+            cells.append(f"{v:.3g} ({v / base[t]:.2f})" if np.isfinite(base[t]) and base[t] > 0 else f"{v:.3g}")
+        rows.append(f"| {m} | " + " | ".join(cells) + " |")
+    return rows
 
 
 def _spp_rows(recs, methods, spps, metric):
@@ -343,8 +402,8 @@ def write_outputs(out, all_records, scenes, methods, times, floors):
     atomic.write_jsonl(os.path.join(out, "records.jsonl"), all_records)
     for name in scenes:
         recs = [r for r in all_records if r["scene"] == name]
-        chart(recs, name, methods, "time", os.path.join(out, f"{name}_time.png"))
-        chart(recs, name, methods, "spp", os.path.join(out, f"{name}_spp.png"))
+        chart(recs, name, methods, "time", os.path.join(out, f"{name}_time.png"), floors.get(name))
+        chart(recs, name, methods, "spp", os.path.join(out, f"{name}_spp.png"), floors.get(name))
     table = summary_table(all_records, scenes, methods, times, floors)
     atomic.write_text(os.path.join(out, "summary.md"), table + "\n")
     return table
@@ -374,11 +433,119 @@ def rescore(out, scene_dir=None):
     return write_outputs(out, records, scenes, methods, times, floors)
 
 
+def scene_name(given):
+    """A scene's name in records and charts: the name given, or a file's stem (its folder's name for
+    the shared scenes' scene.obj and scene.xml)."""
+    if not given.endswith((".obj", ".json", ".xml")):
+        return given
+    stem = os.path.splitext(os.path.basename(given))[0]
+    return os.path.basename(os.path.dirname(os.path.abspath(given))) if stem == "scene" else stem
+
+
+def cell_key(c):
+    """What identifies a cell, and the record it makes: scene, method, seed, budget."""
+    return (c["scene"], c["method"], c["seed"], c["budget"],
+            float(c["time_budget"]) if c["budget"] == "time" else int(c["spp"]))
+
+
+_LOADED = {}  # in each worker process: scene path -> (scene, reference), loaded and warmed up once
+
+
+def run_cell(cell):
+    """One cell in a worker: its record (run_one's, with scene and provenance)."""
+    path, key = cell["path"], (cell["path"], cell["ref_dir"])
+    if key not in _LOADED:
+        ref, _, meta = load_reference(cell["ref_dir"])
+        scene = tracer.load_scene(path, width=meta["width"], height=meta["height"])  # the reference's size
+        tracer.render(scene, spp=1, threads=cell["threads"])  # compile and warm up outside every budget
+        _LOADED[key] = scene, ref
+    scene, ref = _LOADED[key]
+    r = run_one(scene, cell["method"], cell["seed"], ref, time_budget=cell["time_budget"],
+                spp=None if cell["budget"] == "time" else cell["spp"], images=cell["images"], threads=cell["threads"])
+    r.update(scene=cell["scene"], scene_path=os.path.relpath(path, ROOT),
+             machine=f"{platform.machine()}, {os.cpu_count()} cores", date=time.strftime("%Y-%m-%d %H:%M"),
+             threads=cell["threads"])
+    if hasattr(os, "sched_getaffinity"):
+        r["cores"] = sorted(os.sched_getaffinity(0))  # the cores the render's threads could run on
+    if cell["budget"] == "spp":
+        r["spp_budget"] = cell["spp"]
+    return r
+
+
+def read_records(out):
+    """The records stored in out/records.jsonl ([] if none)."""
+    path = os.path.join(out, "records.jsonl")
+    if not os.path.isfile(path):
+        return []
+    with open(path) as f:
+        return [json.loads(line) for line in f if line.strip()]
+
+
+def record_key(r):
+    """cell_key of the cell that made record `r`."""
+    return cell_key(dict(r, spp=r.get("spp_budget", r["spp"])))
+
+
+def default_spps(records, scene, times):
+    """bsdf's median spp at each time budget on `scene`: the default spp budgets."""
+    out = set()
+    for t in times:
+        v = [r["spp"] for r in records if r["scene"] == scene and r["method"] == "bsdf" and r["budget"] == "time"
+             and r["time_budget"] == t]
+        if v:
+            out.add(int(np.median(v)))
+    return sorted(out)
+
+
+def sweep(out, scenes, methods, times, spps, seeds, threads, scheduler=None, workers=None, fresh=False,
+          progress=True):
+    """Every cell (scene x method x seed x budget) not yet in out/records.jsonl, on Dask
+    (bench.sweep); each record is added to the file as it arrives. scenes: [(name, path)]; spps
+    None: bsdf's spp at each time budget (then bsdf is not run again at them), [] none. Returns
+    all records (the stored ones first)."""
+    os.makedirs(out, exist_ok=True)
+    log = os.path.join(out, "records.jsonl")
+    records = [] if fresh else read_records(out)
+    kept = len(records)
+
+    def done(cell, r):
+        records.append(r)
+        atomic.write_jsonl(log, records)  # after every cell, whole: a killed sweep keeps what finished
+        if progress:
+            print(f"{r['scene']} {r['method']} seed {r['seed']} {r['budget']} "
+                  f"{r['time_budget'] if r['budget'] == 'time' else r['spp']}: {r['spp']} spp, "
+                  f"relMSE {r['metrics']['relMSE']:.4g}", flush=True)
+
+    def cell(name, path, m, seed, budget, value):
+        return {"scene": name, "path": path, "ref_dir": common.default_out(path), "method": m, "seed": seed,
+                "budget": budget, "threads": threads,
+                "time_budget": value if budget == "time" else None, "spp": value if budget == "spp" else None,
+                "images": os.path.join(out, "images", name)}
+
+    # methods interleaved, so that a drift of the machine's speed touches them alike
+    timed = [cell(n, p, m, s, "time", t) for n, p in scenes for s in range(seeds) for t in times for m in methods]
+    new = sweep_module.todo(timed, records, record_key)
+    if kept and progress:
+        print(f"bench.convergence: {kept} records in {log} kept, {len(timed) - len(new)} of "
+              f"{len(timed)} time cells done", flush=True)
+    sweep_module.run(run_cell, new, done, threads=threads, scheduler=scheduler, workers=workers,
+                     progress=progress, desc="time cells")
+    counted = []
+    for n, p in scenes:
+        ns = default_spps(records, n, times) if spps is None else spps
+        for m in (methods if spps is not None else [m for m in methods if m != "bsdf"]):
+            counted += [cell(n, p, m, s, "spp", k) for s in range(seeds) for k in ns]
+    sweep_module.run(run_cell, sweep_module.todo(counted, records, record_key), done, threads=threads,
+                     scheduler=scheduler, workers=workers, progress=progress, desc="spp cells")
+    return records
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench.convergence", description=__doc__.splitlines()[0])
     p.add_argument("--scenes", help="comma-separated scene names or paths")
     p.add_argument("--methods", default="bsdf", help="comma-separated registered guide names, each with "
-                   "optional settings: name:key=value,... (separate methods with ';' when settings are given)")
+                   "optional settings: name:key=value,... (separate methods with ';' when settings are given); "
+                   "`all`: ALL_METHODS; any method with +oidn after it is denoised")
     p.add_argument("--time", default="10,20,40,80", help="comma-separated wall-time budgets in seconds "
                    "(none: spp budgets only, given by --spp)")
     p.add_argument("--spp", default=None, help="comma-separated spp budgets (default: what bsdf reached; none: time budgets only)")
@@ -386,6 +553,14 @@ def main(argv=None):
     p.add_argument("--scene-dir", default=None, help="folder of external scenes (<dir>/<name>/scene.obj "
                    "or scene.xml)")
     p.add_argument("--out", default=DEFAULT_OUT)
+    p.add_argument("--threads", type=int, default=os.cpu_count() or 1,
+                   help="threads of each render (default: all cores); the LocalCluster runs cores // threads at once")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="a Dask scheduler to run the cells on (default: a LocalCluster on this machine)")
+    p.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: cores // threads; "
+                   "0: no Dask, every cell in this process)")
+    p.add_argument("--fresh", action="store_true", help="ignore the records already in --out (default: "
+                   "keep them and run only the cells they lack, so a stopped sweep resumes)")
     p.add_argument("--rescore", action="store_true", help="render nothing: score the run stored in --out "
                    "again against the current references")
     a = p.parse_args(argv)
@@ -394,7 +569,10 @@ def main(argv=None):
         return 0
     if not a.scenes:
         p.error("--scenes is required (unless --rescore)")
-    methods = [m.strip() for m in a.methods.split(";" if ";" in a.methods else ",") if m.strip()]
+    if a.threads < 1:
+        p.error("--threads must be >= 1")
+    spec = ";".join(ALL_METHODS) if a.methods == "all" else a.methods
+    methods = [m.strip() for m in spec.split(";" if ";" in spec else ",") if m.strip()]
     for m in methods:  # an unknown guide or setting fails now, not after an hour of runs
         check_method(m)
     if "bsdf" not in methods:
@@ -402,45 +580,16 @@ def main(argv=None):
     times = [] if a.time == "none" else [float(t) for t in a.time.split(",")]
     if not times and (a.spp is None or a.spp == "none"):
         p.error("--time none needs --spp budgets")
-    os.makedirs(a.out, exist_ok=True)
-    all_records = []
-    floors = {}
-    scenes = [s.strip() for s in a.scenes.split(",") if s.strip()]
-    log = os.path.join(a.out, "records.jsonl")
-    for i, given in enumerate(scenes):
-        path = scene_path(given, a.scene_dir)
-        name = os.path.splitext(os.path.basename(given))[0] if given.endswith((".obj", ".json", ".xml")) else given
-        scenes[i] = name
-        ref, _, ref_meta = reference_for(path)
-        floors[name] = ref_meta["noise_floor_relmse"]
-        scene = tracer.load_scene(path, width=ref_meta["width"], height=ref_meta["height"])  # the reference's size
-        images = os.path.join(a.out, "images", name)
-        tracer.render(scene, spp=1)  # compile and warm up outside every budget
-        recs = []
-
-        def done(r):
-            r.update(scene=name, scene_path=os.path.relpath(path, ROOT),
-                     machine=f"{platform.machine()}, {os.cpu_count()} cores", date=time.strftime("%Y-%m-%d %H:%M"))
-            recs.append(r)
-            atomic.write_jsonl(log, all_records + recs)  # after every run, in case of a stop
-
-        # methods interleaved, so that a drift of the machine's speed touches them alike
-        for seed in range(a.seeds):
-            for t in times:
-                for m in methods:
-                    done(run_one(scene, m, seed, ref, time_budget=t, images=images))
-                    print(f"{name} {m} seed {seed} time {t:g}s: {recs[-1]['spp']} spp, "
-                          f"relMSE {recs[-1]['metrics']['relMSE']:.4g}", flush=True)
-        spps = ([] if a.spp == "none" else [int(s) for s in a.spp.split(",")] if a.spp else  # bsdf's median spp per time budget
-                sorted({int(np.median([r["spp"] for r in recs if r["method"] == "bsdf" and r["time_budget"] == t]))
-                        for t in times}))
-        # bsdf's own spp points are its time runs (the default spp budgets are its median spp)
-        for m in (methods if a.spp else [m for m in methods if m != "bsdf"]):
-            for seed in range(a.seeds):
-                for n in spps:
-                    done(run_one(scene, m, seed, ref, spp=n, images=images))
-        all_records += recs
-    print(write_outputs(a.out, all_records, scenes, methods, times, floors))
+    spps = None if a.spp is None else [] if a.spp == "none" else [int(s) for s in a.spp.split(",")]
+    scenes, floors = [], {}
+    for given in (s.strip() for s in a.scenes.split(",") if s.strip()):
+        path = os.path.abspath(scene_path(given, a.scene_dir))
+        name = scene_name(given)
+        floors[name] = reference_for(path)[2]["noise_floor_relmse"]  # a missing reference fails now
+        scenes.append((name, path))
+    records = sweep(a.out, scenes, methods, times, spps, a.seeds, a.threads, a.scheduler, a.workers, a.fresh)
+    names = [n for n, _ in scenes]
+    print(write_outputs(a.out, [r for r in records if r["scene"] in floors], names, methods, times, floors))
     return 0
 
 

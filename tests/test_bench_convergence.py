@@ -16,7 +16,7 @@ def test_convergence_writes_records_charts_and_table(tmp_path, monkeypatch):
     assert reference.main([obj, "--spp", "64", "--out", str(ref_dir)]) == 0
     out = tmp_path / "conv"
     assert convergence.main(["--scenes", obj, "--time", "0.05,0.1", "--spp", "1,2", "--seeds", "2",
-                             "--out", str(out)]) == 0
+                             "--out", str(out), "--workers", "0"]) == 0
     recs = [json.loads(line) for line in open(out / "records.jsonl")]
     assert len(recs) == 2 * 2 + 2 * 2  # seeds x time budgets + seeds x spp budgets, one method
     r = recs[0]
@@ -50,7 +50,7 @@ def _box_run_at_one_time_budget(tmp_path, monkeypatch):
     monkeypatch.setattr(common, "default_out", lambda path: str(ref_dir))
     assert reference.main([obj, "--spp", "16", "--out", str(ref_dir)]) == 0
     out = tmp_path / "conv"
-    assert convergence.main(["--scenes", obj, "--time", "0.05", "--seeds", "2", "--out", str(out)]) == 0
+    assert convergence.main(["--scenes", obj, "--time", "0.05", "--seeds", "2", "--out", str(out), "--workers", "0"]) == 0
     return out, ref_dir
 
 
@@ -90,7 +90,7 @@ def test_rescore_scores_the_stored_images_against_the_current_reference(tmp_path
     data[:, :, :3] *= 2.0
     data[:, :, 3:] = 0.0
     tracer.write_image(str(ref_dir / "reference.exr"), data, channel_names=reference.CHANNELS)
-    assert convergence.main(["--rescore", "--out", str(out)]) == 0
+    assert convergence.main(["--rescore", "--out", str(out), "--workers", "0"]) == 0
     after = [json.loads(line) for line in open(out / "records.jsonl")]
     assert len(after) == len(before)
     for b, a in zip(before, after):
@@ -157,7 +157,7 @@ def test_rescore_reads_records_made_before_update_and_shade_times(tmp_path, monk
             o = {k: v for k, v in r.items() if k not in ("update_s", "inference_s", "shade_s", "samples")}
             old.append(dict(o, method=m, time_inference=0.25))
     (out / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in old))
-    assert convergence.main(["--rescore", "--out", str(out)]) == 0
+    assert convergence.main(["--rescore", "--out", str(out), "--workers", "0"]) == 0
     table = (out / "summary.md").read_text()
     assert "| grid | - |" in table and "| bsdf | - |" in table  # shading cost unknown
     assert "| 0.25 | - |" in table  # update s from time_inference, network inference unknown

@@ -74,6 +74,9 @@ def _parser():
                    help="stops added to the PNG preview's automatic exposure (default 0); the EXR is not changed")
     p.add_argument("--variance", action="store_true",
                    help="also write <name>.variance.exr, the variance of each pixel's mean")
+    p.add_argument("--denoise", nargs="?", const="high", default=None, metavar="QUALITY",
+                   help="also write <name>.denoised.exr and its PNG: Intel Open Image Denoise with the albedo "
+                        "and normal buffers (quality high, balanced or fast; needs pip install -e \".[denoise]\")")
     p.add_argument("-q", "--quiet", action="store_true",
                    help="no progress bar and no compile notice (the summary line is still printed)")
     p.add_argument("-v", "--verbose", action="store_true",
@@ -281,7 +284,11 @@ def _run(argv, warnings):
                                ("recon_alpha", args.recon_alpha)) if v is not None}
     integ = make_integrator(args.integrator, **flags, **parse_settings(args.recon_opt, "--recon-opt"))
     integ.check_guide(guide, guide_name)
-    out_dir = _check_output(out, args.variance, integ.outputs)
+    if args.denoise is not None:
+        from .denoise import require
+
+        require(args.denoise)
+    out_dir = _check_output(out, args.variance, integ.outputs + (("denoised",) if args.denoise else ()))
     ref = _read_reference(args.reference) if args.reference else None
     notice = [not args.quiet]  # once: before framing a scene without a camera, or before the render
 
@@ -313,7 +320,8 @@ def _run(argv, warnings):
                     max_depth=args.max_depth,
                     rr_depth=args.rr_depth, seed=args.seed, accel=args.accel, threads=args.threads,
                     pixel_filter=args.filter, crop=crop,
-                    wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet, integrator=integ)
+                    wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet, integrator=integ,
+                    denoise=args.denoise or False)
     if ref is not None:
         result.stats["metrics"] = metrics.all_metrics(result.image, ref)
     exr, png, js = write_outputs(result, out, exposure=args.exposure, variance=args.variance, reference=ref)
@@ -326,6 +334,8 @@ def _run(argv, warnings):
     print(f"{exr}: {s['width']}x{s['height']}, {s['spp_mean']:.0f} spp{note} in {s['time_total']:.2f} s, "
           f"{s['msamples_per_s']:.2f} Msamples/s, {s['mrays_per_s']:.2f} Mrays/s; preview {png} "
           f"(exposure {s['preview_exposure']:+.2f} EV{', the reference' + chr(39) + 's' if ref is not None else ''}), stats {js}")
+    if result.denoised is not None:
+        print(f"  denoised (Open Image Denoise, {s['time_denoise']:.2f} s): {os.path.splitext(exr)[0]}.denoised.exr")
     if ref is not None:
         print("  ".join(f"{k} {v:.6g}" for k, v in s["metrics"].items()))
     return EXIT_INTERRUPTED if s["interrupted"] else 0

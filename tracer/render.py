@@ -66,7 +66,8 @@ def _int_setting(name, value, lo):
 def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=None, seed=None,
            accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
            guide_settings=None, pixel_filter="box", crop=None, integrator="path", integrator_settings=None,
-           shift=None, recon=None, recon_alpha=None, shift_roughness=None, recon_settings=None, path_loop="thread"):
+           shift=None, recon=None, recon_alpha=None, shift_roughness=None, recon_settings=None, path_loop="thread",
+           denoise=False):
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
     spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
@@ -82,6 +83,9 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     path_loop  "thread" (default): passes that record and split nothing trace each thread's paths to
                their end in packets of 16 (tracer.integrators.thread_loop; Embree only); "wave": every
                pass runs the wavefront, one kernel per stage. The images are the same bit for bit.
+    denoise    True (or a quality: "high", the default, "balanced", "fast"): Intel Open Image Denoise
+               on the final image with its albedo and normal (tracer.denoise; needs the `denoise`
+               extra) into result.denoised; its time counts in time_total and in a time budget
     callback   f(pass_index, film, stats_dict) called after every pass; return False to stop
     pixel_filter  "box" (default: samples uniform over the pixel) or "point" (every sample
                through the pixel centre: no anti-aliasing, so a pixel never mixes two surfaces;
@@ -133,9 +137,22 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     n_threads = min(threads or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS)
     with _NumbaThreads(n_threads):  # every kernel of this render on n_threads, restored after
         return _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress,
-                       callback, guide_settings, pixel_filter, crop, path_loop,
+                       callback, guide_settings, pixel_filter, crop, path_loop, _denoise_quality(denoise),
                        _integrator(integrator, integrator_settings, shift, recon, recon_alpha, shift_roughness,
                                    recon_settings))
+
+
+def _denoise_quality(denoise):
+    """render()'s `denoise` as a quality name, None for no denoising (checked: pyoidn installed)."""
+    if denoise is False or denoise is None:
+        return None
+    quality = "high" if denoise is True else denoise
+    if not isinstance(quality, str):
+        raise SettingsError(f"denoise must be True, False or a quality name, got {denoise!r}")
+    from .denoise import require
+
+    require(quality)
+    return quality
 
 
 def _integrator(spec, settings, shift, recon, recon_alpha, shift_roughness, recon_settings):
@@ -197,7 +214,7 @@ def make_context(scene, accel="embree", seed=None, max_depth=None, rr_depth=None
 
 
 def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads, wave_size, progress, callback,
-            guide_settings, pixel_filter, crop, path_loop, integ):
+            guide_settings, pixel_filter, crop, path_loop, denoise, integ):
     """render() on n_threads Numba threads, with the Integrator `integ`."""
     rs = scene.render
     max_depth, rr_depth, seed, crop = _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop)
@@ -244,6 +261,12 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     if splits:
         warm_up_splitting(ctx)
     integ.warm_up(ctx)
+    denoiser = den_reserve = None
+    if denoise is not None:  # the device made, its weights loaded and its time measured off the clock
+        from .denoise import Denoiser, reserve_seconds
+
+        denoiser = Denoiser.shared(n_threads, denoise)
+        den_reserve = reserve_seconds(denoiser, crop[2], crop[3])
     t_compile = _time.perf_counter() - t0
     t_start = _time.perf_counter() - t_setup  # the budget counts the scene set-up, not the compile
     if g is not None:
@@ -267,7 +290,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
                       g)
 
     sigint = _Sigint()
-    reserve = integ.reserve(crop[2], crop[3]) if time is not None else 0.0
+    reserve = integ.reserve(crop[2], crop[3]) + (den_reserve or 0.0) if time is not None else 0.0
     session = Session(ctx, g, buf, stats, spp if time is None else None, time, t_start, bar, callback, snapshot,
                       lambda: sigint.requested, reserve=reserve, integrator=integ)
     interrupted = False
@@ -287,7 +310,13 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
             bar.n = stats.samples / npix  # what it showed, to the last wave, as stats["spp_mean"]
             bar.refresh()
             bar.close()
-    return integ.result(session, interrupted, snapshot)
+    result = integ.result(session, interrupted, snapshot)
+    if denoiser is not None:
+        from .denoise import apply
+
+        result.stats["denoise"] = denoise
+        apply(result, denoiser)
+    return result
 
 
 class _Sigint:
@@ -355,7 +384,7 @@ def _stats(scene, stats, passes, spp, t_setup, t_start, t_render, settings, t_co
 
 def write_outputs(result, path, exposure=0.0, variance=False, reference=None):
     """Write `path` (EXR, RGB, linear), a PNG preview, `<name>.aovs.exr` (albedo, normal, depth),
-    with `variance` `<name>.variance.exr` (result.variance, the variance of each pixel's mean), for
+    for a denoised render `<name>.denoised.exr` and `.denoised.png`, with `variance` `<name>.variance.exr` (result.variance, the variance of each pixel's mean), for
     a gradient-domain render `<name>.base.exr`, `.dx.exr`, `.dy.exr`, and a stats JSON beside it;
     returns the paths of the EXR, the PNG and the JSON. A missing folder is created.
 
@@ -383,6 +412,9 @@ def write_outputs(result, path, exposure=0.0, variance=False, reference=None):
                 channel_names=("albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z"))
     if variance:
         write_image(base + ".variance.exr", result.variance)
+    if result.denoised is not None:  # render(denoise=...): OIDN's image, its preview at the same exposure
+        write_image(base + ".denoised.exr", result.denoised)
+        write_image(base + ".denoised.png", preview(result.denoised, stops))
     for name in ("base", "dx", "dy"):  # integrator gpt: the buffers the reconstruction came from
         if name in result.buffers:
             write_image(f"{base}.{name}.exr", result.buffers[name])

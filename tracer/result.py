@@ -22,6 +22,7 @@ class RenderResult:
     stats: dict
     film: Film = field(repr=False)
     buffers: dict = field(default_factory=dict, repr=False)  # integrator gpt: base, dx, dy, ... (see render())
+    denoised: np.ndarray = field(default=None, repr=False)  # render(denoise=True): the image denoised (OIDN)
 
     def __repr__(self):
         s = self.stats
