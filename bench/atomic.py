@@ -82,5 +82,17 @@ def save_npy(path, array):
     write(path, w)
 
 
+def save_npz(path, **arrays):
+    import numpy as np
+
+    def w(tmp):
+        with open(tmp, "wb") as f:
+            np.savez(f, **arrays)
+            f.flush()
+            os.fsync(f.fileno())
+
+    write(path, w)
+
+
 def write_image(path, array, **kw):
     write(path, image_writer(array, **kw))

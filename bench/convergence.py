@@ -43,6 +43,7 @@ Every output is written to a temporary file beside it and renamed into place (be
 stopped run leaves complete files: records.jsonl is rewritten after every run.
 """
 import argparse
+import gc
 import json
 import os
 import platform
@@ -467,6 +468,7 @@ def run_cell(cell):
              threads=cell["threads"])
     if hasattr(os, "sched_getaffinity"):
         r["cores"] = sorted(os.sched_getaffinity(0))  # the cores the render's threads could run on
+    gc.collect()  # a worker renders hundreds of times: what a cycle holds goes now, not at the next full collection
     if cell["budget"] == "spp":
         r["spp_budget"] = cell["spp"]
     return r

@@ -4,6 +4,7 @@
     python -m bench.reference ../shared/scenes/veach-ajar/scene.obj --spp 4096 \\
         --out bench/results/references/veach-ajar
     python -m bench.reference scenes/ajar/ajar.obj --time 600 --append   # add more samples
+    python -m bench.reference scenes/ajar/ajar.obj --time 600 --append --segments 4 --threads 1  # 4 seeds, Dask
 
 Writes `<out>/reference.exr` with six channels (R, G, B, var.R, var.G, var.B: the mean and the
 variance of that mean) and `<out>/reference.json`: spp, seconds, seeds, machine, and the
@@ -17,6 +18,11 @@ from both variances (bias_z; aggregated over pixels first) must stay below the t
 threshold, Sidak-corrected over the three channels. A segment of a scene or renderer that has
 changed since would otherwise bias the reference without a trace; when it fails, nothing is
 written and the command exits naming the folder and the z-scores (`--force` merges anyway).
+
+`--segments K` renders K segments (seeds) at once on Dask, a LocalCluster by default (each worker
+pinned to its cores, as bench.convergence's sweep) or `--scheduler ADDRESS`, then merges them
+into the reference in seed order, each through the same check. A finished segment waits in
+`<out>/segments/` until it is merged, so a stopped run started again renders only the missing ones.
 
 reference.json keeps `segments`, one per render merged in: seed, spp, seconds, the commit of this
 repository (`-dirty` when tracked files differed from it), date, machine, command, and for appended ones
@@ -42,7 +48,7 @@ from tracer.imageio import tonemap
 from tracer.provenance import git_commit
 from tracer.testing import z_critical
 
-from . import atomic
+from . import atomic, sweep
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CHANNELS = ("R", "G", "B", "var.R", "var.G", "var.B")
@@ -111,13 +117,45 @@ def segments_of(meta):
              "synthesized": "from the fields of a reference made before segments were recorded"}]
 
 
+def render_segment(cell):
+    """One segment in a worker (or this process): render the scene at cell's size with cell's seed
+    and budget, and store mean, variance and its record in cell["path"] (an .npz, written whole);
+    returns the path."""
+    scene = tracer.load_scene(cell["scene"], **cell["size"])
+    commit, date = git_commit() or "unknown", time.strftime("%Y-%m-%d %H:%M")  # what renders the segment
+    t0 = time.time()
+    r = tracer.render(scene, spp=cell["spp"], time=cell["time"], seed=cell["seed"], progress=cell["progress"],
+                      threads=cell["threads"])
+    seconds = time.time() - t0
+    segment = {"seed": int(cell["seed"]), "spp": int(r.stats["spp"]), "seconds": round(seconds, 1), "commit": commit,
+               "date": date, "machine": f"{platform.machine()}, {os.cpu_count()} cores", "command": cell["command"],
+               "accel": r.stats["accel"], "width": scene.width, "height": scene.height,
+               "max_depth": scene.render.max_depth, "rr_depth": scene.render.rr_depth}
+    atomic.save_npz(cell["path"], mean=r.image.astype(np.float64), var=r.variance.astype(np.float64),
+                    segment=json.dumps(segment))
+    return cell["path"]
+
+
+def _read_segment(path):
+    with np.load(path) as z:
+        return z["mean"], z["var"], json.loads(str(z["segment"]))
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench.reference", description=__doc__.splitlines()[0])
     p.add_argument("scene")
     budget = p.add_mutually_exclusive_group(required=True)
-    budget.add_argument("--spp", type=int)
-    budget.add_argument("--time", type=float, help="seconds of rendering")
+    budget.add_argument("--spp", type=int, help="samples per pixel of each segment")
+    budget.add_argument("--time", type=float, help="seconds of rendering of each segment")
     p.add_argument("--seed", type=int, default=1000, help="seed of the first render (appends use the next)")
+    p.add_argument("--segments", type=int, default=1, help="independent renders (seeds) to make and merge; "
+                   "more than one run on Dask, one per worker at a time")
+    p.add_argument("--threads", type=int, default=None, help="threads of each render (default: all cores, "
+                   "shared among the segments rendered at once)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="a Dask scheduler for the segments "
+                   "(default: a LocalCluster on this machine)")
+    p.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: cores // threads; "
+                   "0: every segment in this process)")
     p.add_argument("--out", default=None)
     p.add_argument("--width", type=int, help="image width (default: the scene's)")
     p.add_argument("--height", type=int, help="image height (default: the scene's)")
@@ -125,35 +163,56 @@ def main(argv=None):
     p.add_argument("--force", action="store_true", help="with --append: merge even if the new segment "
                    "disagrees with the stored mean")
     a = p.parse_args(argv)
+    if a.segments < 1:
+        p.error("--segments must be >= 1")
     command = "python -m bench.reference " + " ".join(argv if argv is not None else sys.argv[1:])
     out = a.out or default_out(a.scene)
     os.makedirs(out, exist_ok=True)
     size = {k: v for k, v in (("width", a.width), ("height", a.height)) if v}
-    scene = tracer.load_scene(a.scene, **size)
-    old = None
-    seed = a.seed
-    if a.append and os.path.isfile(os.path.join(out, "reference.exr")):
-        old = load(out)
-        seed = max(old[2]["seeds"]) + 1
-    commit, date = git_commit() or "unknown", time.strftime("%Y-%m-%d %H:%M")  # what renders the segment
-    t0 = time.time()
-    r = tracer.render(scene, spp=a.spp, time=a.time, seed=seed, progress=True)
-    seconds = time.time() - t0
-    mean, var, spp = r.image.astype(np.float64), r.variance.astype(np.float64), r.stats["spp"]
-    seeds, total_seconds = [seed], seconds
-    segment = {"seed": int(seed), "spp": int(spp), "seconds": round(seconds, 1), "commit": commit, "date": date,
-               "machine": f"{platform.machine()}, {os.cpu_count()} cores", "command": command}
+    stored = os.path.isfile(os.path.join(out, "reference.exr"))
+    seed = max(load(out)[2]["seeds"]) + 1 if a.append and stored else a.seed
+    # Each segment lands in out/segments/ first: a stopped run keeps the finished ones, and the next
+    # run with the same seeds merges them without rendering them again.
+    folder = os.path.join(out, "segments")
+    cells = [{"scene": a.scene, "size": size, "spp": a.spp, "time": a.time, "seed": s, "command": command,
+              "threads": a.threads, "progress": a.segments == 1,
+              "path": os.path.join(folder, f"seed_{s}.npz")} for s in range(seed, seed + a.segments)]
+    os.makedirs(folder, exist_ok=True)
+    todo = [c for c in cells if not os.path.isfile(c["path"])]
+    local = a.segments == 1 and a.scheduler is None
+    threads = a.threads or (os.cpu_count() or 1) // (1 if local else min(a.segments, os.cpu_count() or 1))
+    for c in todo:
+        c["threads"] = max(1, threads)
+    sweep.run(render_segment, todo, lambda c, path: None, threads=max(1, threads), scheduler=a.scheduler,
+              workers=0 if local else a.workers, progress=not local, desc="segments")
+    try:
+        for i, c in enumerate(cells):  # merged in seed order, each checked against what is stored
+            try:
+                merge_segment(out, *_read_segment(c["path"]), append=stored or i > 0, force=a.force, scene=a.scene)
+            finally:  # merged, or refused (a refused one is rendered again with --force)
+                os.remove(c["path"])
+    finally:
+        if not os.listdir(folder):
+            os.rmdir(folder)
+    return 0
+
+
+def merge_segment(out, mean, var, segment, append, force, scene):
+    """Store a segment as the reference in `out`, or (append) merge it into the stored one after the
+    z-check; SystemExit, nothing written, if it disagrees (unless force)."""
+    spp, seeds, total_seconds = segment["spp"], [segment["seed"]], segment["seconds"]
+    info = {k: segment.pop(k) for k in ("accel", "width", "height", "max_depth", "rr_depth")}
     segments = [segment]
-    if old is not None:
-        om, ov, meta = old
+    if append:
+        om, ov, meta = load(out)
         if om.shape != mean.shape:
             raise SystemExit(f"{out}: stored reference is {om.shape[1]}x{om.shape[0]}, the scene renders "
                              f"{mean.shape[1]}x{mean.shape[0]}")
         ok, z, zc = agreement(mean, var, om, ov)
         zs = ", ".join(f"{v:+.2f}" for v in z)
-        if not ok and not a.force:
-            raise SystemExit(f"bench.reference: {out}: the new segment (seed {seed}, {spp} spp) disagrees with "
-                             f"the stored mean: z (R, G, B) = {zs}, |z| must stay below {zc:.2f}; nothing "
+        if not ok and not force:
+            raise SystemExit(f"bench.reference: {out}: the new segment (seed {segment['seed']}, {spp} spp) disagrees "
+                             f"with the stored mean: z (R, G, B) = {zs}, |z| must stay below {zc:.2f}; nothing "
                              f"written (--force merges anyway)")
         print(f"{out}: new segment against the stored mean: z (R, G, B) = {zs} (threshold {zc:.2f})"
               + ("" if ok else ": disagrees, merged because of --force"))
@@ -166,13 +225,13 @@ def main(argv=None):
         seeds = meta["seeds"] + seeds
         total_seconds += meta["seconds"]
     meta = {
-        "scene": os.path.relpath(os.path.abspath(a.scene), ROOT),
-        "width": scene.width, "height": scene.height, "spp": int(spp), "seconds": round(total_seconds, 1),
-        "seeds": seeds, "max_depth": scene.render.max_depth, "rr_depth": scene.render.rr_depth,
-        "integrator": "path tracing, bsdf sampling + NEE (MIS)", "accel": r.stats["accel"],
+        "scene": os.path.relpath(os.path.abspath(scene), ROOT),
+        "width": info["width"], "height": info["height"], "spp": int(spp), "seconds": round(total_seconds, 1),
+        "seeds": seeds, "max_depth": info["max_depth"], "rr_depth": info["rr_depth"],
+        "integrator": "path tracing, bsdf sampling + NEE (MIS)", "accel": info["accel"],
         "machine": f"{platform.machine()}, {os.cpu_count()} cores",
         "noise_floor_relmse": noise_floor(mean, var),
-        "command": command,
+        "command": segment["command"],
         "segments": segments,
     }
     atomic.write_all([
@@ -182,7 +241,6 @@ def main(argv=None):
         (os.path.join(out, "reference.json"), atomic.text_writer(json.dumps(meta, indent=1))),
     ])
     print(f"{out}/reference.exr: {spp} spp, {total_seconds:.0f} s, noise floor relMSE {meta['noise_floor_relmse']:.3g}")
-    return 0
 
 
 if __name__ == "__main__":

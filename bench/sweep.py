@@ -55,11 +55,20 @@ def local_workers(threads):
     return max(1, (os.cpu_count() or 1) // max(1, threads))
 
 
+FRESH_AFTER = 40  # LocalCluster: cells per worker between restarts of its processes (see run)
+
+
 def run(fn, cells, done, threads=1, scheduler=None, workers=None, progress=True, desc="cells"):
     """fn(cell) for every cell on Dask (fn importable by the workers: a module-level function);
     done(cell, result) in this process as each finishes. scheduler: a Dask scheduler address (None:
     a LocalCluster of `workers` processes, default local_workers(threads), each pinned to its
-    cores; workers 0: no Dask, the cells in this process in order)."""
+    cores; workers 0: no Dask, the cells in this process in order).
+
+    On the LocalCluster the cells go in batches of FRESH_AFTER per worker, the worker processes
+    restarted between batches: a worker's resident memory grew by 40-200 MB per cell over a
+    594-cell sweep (to 20 GB on the 24 GB VM), which a plain loop of the same renders in one process
+    does not do (docs/findings.md, 2026-11-27). A restart costs the worker's imports and its
+    first render of each scene, outside every budget."""
     if not cells:
         return
     if workers == 0 and scheduler is None:  # in this process, one after the other (no Dask)
@@ -75,22 +84,18 @@ def run(fn, cells, done, threads=1, scheduler=None, workers=None, progress=True,
             n = min(workers or local_workers(threads), len(cells))
             pinned = n * threads <= (os.cpu_count() or 1)
             env = {WORKER_ENV: str(threads if pinned else 0), "OMP_NUM_THREADS": str(threads)}
-            old = {k: os.environ.get(k) for k in env}
-            os.environ.update(env)  # the worker processes inherit it
-            try:
-                cluster = stack.enter_context(LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                                           dashboard_address=None, silence_logs=40))
-            finally:
-                for k, v in old.items():
-                    if v is None:
-                        os.environ.pop(k, None)
-                    else:
-                        os.environ[k] = v
+            cluster = stack.enter_context(LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                       dashboard_address=None, silence_logs=40, env=env))
             client = stack.enter_context(Client(cluster))
         else:
             client = stack.enter_context(Client(scheduler))
-        futs = {client.submit(_call, fn, c, pin, pure=False, priority=-i): c for i, c in enumerate(cells)}
         bar = stack.enter_context(tqdm(total=len(cells), desc=desc, unit="cell", disable=not progress))
-        for fut in as_completed(futs):
-            done(futs[fut], fut.result())
-            bar.update(1)
+        step = FRESH_AFTER * n if pin else len(cells)
+        for b in range(0, len(cells), step):
+            if b > 0:
+                client.restart()
+            batch = cells[b:b + step]
+            futs = {client.submit(_call, fn, c, pin, pure=False, priority=-i): c for i, c in enumerate(batch)}
+            for fut in as_completed(futs):
+                done(futs[fut], fut.result())
+                bar.update(1)

@@ -114,3 +114,25 @@ def test_append_accepts_a_segment_of_the_same_scene_and_records_the_segments(tmp
     segs = reference.load(out)[2]["segments"]
     assert segs[0]["seeds"] == [1000, 1001] and segs[0]["spp"] == 24 and segs[0]["commit"] == "unknown"
     assert segs[1]["seed"] == 1002 and segs[1]["spp"] == 8 and reference.load(out)[2]["spp"] == 32
+
+
+def test_segments_are_merged_in_seed_order_through_the_check(tmp_path):
+    """--segments 3 (rendered in this process here, --workers 0; bench.sweep runs them on Dask
+    otherwise): three seeds merged one by one, each z-checked against what was stored before it,
+    into exactly the reference that three appends of one seed each make. Detects a segment merged
+    twice or lost, a wrong weighting, a skipped check, and segment files left behind."""
+    import os
+
+    obj = _box_reference(tmp_path)
+    a, b = tmp_path / "ref_a", tmp_path / "ref_b"
+    assert reference.main([obj, "--spp", "4", "--out", str(a), "--segments", "3", "--workers", "0"]) == 0
+    assert reference.main([obj, "--spp", "4", "--out", str(b)]) == 0
+    for _ in range(2):
+        assert reference.main([obj, "--spp", "4", "--out", str(b), "--append"]) == 0
+    ma, va, meta_a = reference.load(a)
+    mb, vb, meta_b = reference.load(b)
+    np.testing.assert_array_equal(ma, mb)
+    np.testing.assert_array_equal(va, vb)
+    assert meta_a["seeds"] == meta_b["seeds"] == [1000, 1001, 1002] and meta_a["spp"] == 12
+    assert [len(s.get("z", [])) for s in meta_a["segments"]] == [0, 3, 3]
+    assert sorted(os.listdir(a)) == ["reference.exr", "reference.json", "reference.png"]

@@ -20,7 +20,7 @@ def test_todo_leaves_out_the_cells_with_a_record():
 
 
 def test_a_killed_sweep_resumes_without_rerunning_finished_cells(tmp_path):
-    """The sweep (6 cells of 0.4 s on 2 pinned single-thread workers) is killed with SIGKILL, the
+    """The sweep (6 cells of 0.4 s on 2 pinned single-thread workers, restarted after 4) is killed with SIGKILL, the
     whole process group, once its first record is stored; records.jsonl must then hold whole
     records only. Run again, it must add exactly the missing cells: the records (their dates and
     timings) and images of the finished ones stay as they were, and every cell has one record.
@@ -32,8 +32,9 @@ def test_a_killed_sweep_resumes_without_rerunning_finished_cells(tmp_path):
     out = tmp_path / "conv"
     script = tmp_path / "sweep.py"
     script.write_text(textwrap.dedent(f"""
-        from bench import common, convergence
+        from bench import common, convergence, sweep
         common.default_out = lambda path: {str(ref_dir)!r}
+        sweep.FRESH_AFTER = 2  # the workers restarted after every 4 cells
         if __name__ == "__main__":  # the workers' processes import this file too
             raise SystemExit(convergence.main(["--scenes", {obj!r}, "--time", "0.4", "--seeds", "6",
                                                "--threads", "1", "--workers", "2", "--out", {str(out)!r}]))

@@ -559,3 +559,17 @@ def test_lum_and_ns_to_alpha():
 def test_sidak_level():
     # Guard against a silently lax suite: the corrected level is well below 1%
     assert sidak(NTESTS) < 0.01 / NTESTS * 1.01
+
+
+@pytest.mark.parametrize("cos_i", [1.0, 0.7, 0.2, 0.0])
+def test_conductor_none_reflects_everything_at_every_angle(cos_i):
+    """Mitsuba's conductor material "none" (eta = k = 0) is a perfect mirror: Fresnel 1 at every
+    incidence. At exactly normal incidence the exact formula's p term is 0/0: the AOV's albedo
+    (bsdf_albedo, which evaluates at cos 1) came out NaN on Mitsuba's bathroom mirror, and the
+    images denoised or reconstructed by GradNet with it. Detects that NaN and any other value."""
+    from tracer.bsdfs import METAL, bsdf_albedo, fresnel_conductor
+
+    assert fresnel_conductor(cos_i, 0.0, 0.0) == 1.0
+    prm = np.zeros(17)
+    prm[3:6] = (0.9, 0.8, 0.7)  # ks; eta and k (8:14) zero
+    assert bsdf_albedo((np.int32(METAL), tuple(prm))) == pytest.approx((0.9, 0.8, 0.7), abs=1e-15)

@@ -523,7 +523,8 @@ def fresnel_conductor(cos_i, eta, k):
     rs = (term1 - term2) / (term1 + term2)
     term3 = a2b2 * c2 + s4
     term4 = term2 * s2
-    rp = rs * (term3 - term4) / (term3 + term4)
+    den = term3 + term4  # 0 only at normal incidence on eta = k = 0, where rp = rs
+    rp = rs * (term3 - term4) / den if den > 0.0 else rs
     return 0.5 * (rs + rp)
 
 

@@ -75,8 +75,9 @@ class Denoiser:
         if err:
             raise RuntimeError(f"Open Image Denoise failed {what}: {err}")
 
-    def _filter(self, images, hdr, what):
-        """Run one RT filter over {slot: float32 (H, W, 3) array}, the output array among them."""
+    def run_filter(self, images, hdr, what, clean_aux=True):
+        """Run one RT filter over {slot: float32 (H, W, 3) array}, the output array among them;
+        hdr: the colour filter (with cleanAux: the buffers were prefiltered), else a prefilter."""
         o = self._oidn
         f = o.Filter(self.device, "RT")
         try:
@@ -84,7 +85,7 @@ class Denoiser:
                 f.set_image(slot, arr, o.OIDN_FORMAT_FLOAT3)
             if hdr:
                 f.set_bool("hdr", True)
-                f.set_bool("cleanAux", True)
+                f.set_bool("cleanAux", clean_aux)
             f.set_quality(self.quality)
             f.commit()
             f.execute()
@@ -108,11 +109,11 @@ class Denoiser:
                 raise SettingsError(f"denoise: the {slot} buffer is {aux.shape}, the image {shape}")
             aux = np.clip(aux, 0.0, 1.0) if slot == "albedo" else np.clip(aux, -1.0, 1.0)
             clean = np.empty_like(aux)
-            self._filter({slot: np.ascontiguousarray(aux), "output": clean}, False, f"prefiltering the {slot}")
+            self.run_filter({slot: np.ascontiguousarray(aux), "output": clean}, False, f"prefiltering the {slot}")
             images[slot] = clean
         out = np.empty_like(color)
         images["output"] = out
-        self._filter(images, True, "denoising the image")
+        self.run_filter(images, True, "denoising the image")
         return out
 
     def close(self):

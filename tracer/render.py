@@ -311,6 +311,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
             bar.refresh()
             bar.close()
     result = integ.result(session, interrupted, snapshot)
+    session.snapshot = None  # the one cycle (snapshot reads the session): the accel's C memory goes with the frame
     if denoiser is not None:
         from .denoise import apply
 
