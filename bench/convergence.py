@@ -262,7 +262,7 @@ def summary_table(all_records, scenes, methods, times, floors):
         for metric in (CHART_METRICS if times else ()):
             lines += [f"{metric} at equal time:", "",
                       "| method | " + " | ".join(f"{t:g} s" for t in times) + " |", "|---|" + "---|" * len(times)]
-            lines += _time_rows(recs, methods, times, metric) + [""]
+            lines += _rows(recs, methods, times, metric, "time_budget") + [""]
         base = {t: np.mean([r["metrics"]["relMSE"] for r in recs if r["method"] == "bsdf" and r["time_budget"] == t]
                            or [np.nan]) for t in times}
         lines += spp_table([r for r in all_records if r["scene"] == scene and r["budget"] == "spp"], methods)
@@ -304,38 +304,24 @@ def summary_table(all_records, scenes, methods, times, floors):
     return "\n".join(lines)
 
 
-def _time_rows(recs, methods, times, metric):
-    """Table rows of `metric` at each time budget: mean over seeds, ratio to bsdf in brackets."""
-    def values(m, t):
-        return [r["metrics"][metric] for r in recs if r["method"] == m and r["time_budget"] == t
+def _rows(recs, methods, budgets, metric, key):
+    """Table rows of `metric` at each budget (r[key] equal to it: "time_budget" or "spp"): mean over
+    seeds, ratio to bsdf in brackets; "-" where a method has no run."""
+    def values(m, x):
+        return [r["metrics"][metric] for r in recs if r["method"] == m and r[key] == x
                 and r["metrics"].get(metric) is not None]
 
-    base = {t: np.mean(values("bsdf", t) or [np.nan]) for t in times}
+    base = {x: np.mean(values("bsdf", x) or [np.nan]) for x in budgets}
     rows = []
     for m in methods:
         cells = []
-        for t in times:
-            e = values(m, t)
+        for x in budgets:
+            e = values(m, x)
             if not e:
                 cells.append("-")
                 continue
             v = float(np.mean(e))
-            cells.append(f"{v:.3g} ({v / base[t]:.2f})" if np.isfinite(base[t]) and base[t] > 0 else f"{v:.3g}")
-        rows.append(f"| {m} | " + " | ".join(cells) + " |")
-    return rows
-
-
-def _spp_rows(recs, methods, spps, metric):
-    """Table rows of `metric` at each spp: mean over seeds, ratio to bsdf in brackets."""
-    base = {n: np.mean([r["metrics"][metric] for r in recs if r["method"] == "bsdf" and r["spp"] == n] or [np.nan])
-            for n in spps}
-    rows = []
-    for m in methods:
-        cells = []
-        for n in spps:
-            e = [r["metrics"][metric] for r in recs if r["method"] == m and r["spp"] == n]
-            cells.append(f"{np.mean(e):.3g} ({np.mean(e) / base[n]:.2f})" if e and np.isfinite(base[n]) and base[n] > 0
-                         else f"{np.mean(e):.3g}" if e else "-")
+            cells.append(f"{v:.3g} ({v / base[x]:.2f})" if np.isfinite(base[x]) and base[x] > 0 else f"{v:.3g}")
         rows.append(f"| {m} | " + " | ".join(cells) + " |")
     return rows
 
@@ -354,7 +340,7 @@ def spp_table(recs, methods):
     for metric in SPP_METRICS:
         lines += [f"{metric} at equal spp (every sample traced counts, a learning or initial pass's too):", "",
                   "| method | " + " | ".join(f"{n} spp" for n in spps) + " |", "|---|" + "---|" * len(spps)]
-        lines += _spp_rows(recs, methods, spps, metric) + [""]
+        lines += _rows(recs, methods, spps, metric, "spp") + [""]
     odis = [m for m in methods if any(r["method"] == m and r.get("guide_stats", {}).get("pixels_guided") is not None
                                       for r in recs)]
     if odis:
