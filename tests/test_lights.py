@@ -1,16 +1,17 @@
 """Light sampling: the density NEE reports is the one it samples from, for the environment map
-and for triangles chosen by power, one-sided. Light densities jump at every pixel and triangle
-edge, which sphere quadrature cannot integrate well, so they are checked by unbiasedness:
-E[f / p] equals the exact integral of f (z-tests on the sample variance)."""
+(both conventions: the tracer's texels and Mitsuba 3's bilinear envmap) and for triangles chosen by
+power, one-sided. Light densities jump at every pixel and triangle edge, so they are checked by
+unbiasedness: E[f / p] equals the exact integral of f (z-tests on the sample variance); Mitsuba's
+map also by chi-square of its samples against its pdf (tracer.testing.chi2)."""
 import numpy as np
 from numba import njit
 
 import tracer
-from tracer.lights import build_lights, env_pdf, sample_light, triangle_light_pdf
+from tracer.lights import ENV_BILINEAR, build_lights, env_pdf, env_radiance, sample_light, triangle_light_pdf
 from tests import scenes
 from tracer.testing.stats import assert_z
 
-N_TESTS = 3  # z-test groups in this file (Sidak)
+N_TESTS = 4  # z-test groups in this file (Sidak)
 
 
 @njit(cache=True)
@@ -31,6 +32,14 @@ def _env_pdf_batch(lt, d):
     out = np.zeros(d.shape[0])
     for i in range(d.shape[0]):
         out[i] = env_pdf(lt, (d[i, 0], d[i, 1], d[i, 2]))
+    return out
+
+
+@njit(cache=True)
+def _env_radiance_batch(lt, d):
+    out = np.zeros((d.shape[0], 3))
+    for i in range(d.shape[0]):
+        out[i] = env_radiance(lt, (d[i, 0], d[i, 1], d[i, 2]))
     return out
 
 
@@ -101,6 +110,79 @@ def test_environment_map_sampling_is_unbiased(tmp_path):
     assert_z(est.mean(axis=0), est.var(axis=0, ddof=1) / n, exact, n_tests=N_TESTS * 3, what="E[L/p]")
     inv = 1.0 / p
     assert_z(inv.mean(), inv.var(ddof=1) / n, 4 * np.pi, n_tests=N_TESTS, what="E[1/p]")
+
+
+MITSUBA_ENV = """<scene version="3.0.0">
+    <sensor type="perspective"><transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>
+        </transform><film type="hdrfilm"><integer name="width" value="4"/><integer name="height" value="4"/></film>
+    </sensor>
+    <shape type="rectangle"/>
+    <emitter type="envmap"><string name="filename" value="env.exr"/>
+        <transform name="to_world"><rotate x="0.6" y="0.8" angle="40"/></transform></emitter>
+</scene>
+"""
+
+
+def _mitsuba_env(tmp_path):
+    """(lights, image) of a Mitsuba envmap (9 x 12, a sun of two texels) under a rotation."""
+    g = np.random.default_rng(4)
+    img = (g.random((9, 12, 3)) ** 4 * 10 + 0.01).astype(np.float32)
+    img[3, 4:6] = 200.0
+    tracer.write_image(tmp_path / "env.exr", img)
+    (tmp_path / "scene.xml").write_text(MITSUBA_ENV)
+    lt = build_lights(tracer.load_scene(str(tmp_path / "scene.xml")))
+    assert lt.env_type == ENV_BILINEAR and lt.p_env == 1.0
+    return lt, img.astype(np.float64)
+
+
+def test_mitsuba_envmap_sampling_matches_its_pdf(tmp_path):
+    """Chi-square of 400k NEE samples of a rotated Mitsuba envmap against env_pdf, and the pdf NEE
+    reports equals env_pdf at its direction. Detects a sampler whose (u, v) <-> direction map, half
+    texel shift, rotation or Jacobian disagrees with the density that MIS weights use."""
+    from tracer.testing.chi2 import ChiSquareTest
+
+    lt, img = _mitsuba_env(tmp_path)
+    x = np.zeros(3)
+    # histogrammed in the map's frame, its pole on the grid's +z: (-z, x, y) of the map's frame,
+    # so that the density's jumps between rows are the grid's circles of constant z (breaks)
+    q = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]) @ lt.env_rot
+
+    def sample(u):
+        d, p = _sample_batch(lt, np.zeros((1, 3, 3)), x, np.column_stack([np.zeros(len(u)), u]))
+        return d @ q.T
+
+    rows = np.cos(np.pi * np.arange(1, img.shape[0] - 1) / (img.shape[0] - 1))
+    t = ChiSquareTest(sample, lambda d: _env_pdf_batch(lt, d @ q), sample_dim=2, n=400_000, res=(31, 61), seed=3,
+                      breaks=rows)
+    assert t.run(), t.message
+    assert abs(t.pdf_integral - 1.0) < max(5 * t.quad_error, 2e-3), t.message
+    d, p = _sample_batch(lt, np.zeros((1, 3, 3)), x, np.random.default_rng(5).random((10_000, 3)))
+    np.testing.assert_allclose(p, _env_pdf_batch(lt, d), rtol=1e-6)
+
+
+def test_mitsuba_envmap_sampling_is_unbiased(tmp_path):
+    """E[L(w) / p(w)] over NEE samples = the integral of Mitsuba's bilinear radiance over the
+    sphere (exact: linear in u within a cell, 16-point Gauss-Legendre in v against sin theta).
+    Detects a sampler that misses part of the sphere or weighs a cell by the wrong density, and
+    radiance looked up with a different interpolation than the integral's."""
+    lt, img = _mitsuba_env(tmp_path)
+    h, w = img.shape[:2]
+    n = 400_000
+    d, p = _sample_batch(lt, np.zeros((1, 3, 3)), np.zeros(3), np.random.default_rng(6).random((n, 3)))
+    assert np.all(p > 0)
+    L = _env_radiance_batch(lt, d)
+    # the integral: over u a cell's mean is the mean of its two columns (all columns: the row mean)
+    row = img.mean(axis=1)  # (h, 3)
+    gx, gw = np.polynomial.legendre.leggauss(16)
+    t, wt = 0.5 * (gx + 1.0), 0.5 * gw
+    exact = np.zeros(3)
+    for y in range(h - 1):
+        v = (y + t) / (h - 1)
+        f = (1 - t)[:, None] * row[y] + t[:, None] * row[y + 1]
+        exact += (wt[:, None] * f * np.sin(np.pi * v)[:, None]).sum(axis=0) / (h - 1)
+    exact *= 2 * np.pi * np.pi  # d omega = 2 pi^2 sin(theta) du dv
+    est = L / p[:, None]
+    assert_z(est.mean(axis=0), est.var(axis=0, ddof=1) / n, exact, n_tests=N_TESTS * 3, what="E[L/p]")
 
 
 def _lamp_scene(tmp_path):

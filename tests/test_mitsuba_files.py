@@ -7,9 +7,11 @@ import zlib
 
 import numpy as np
 import pytest
+from numba import njit
 
 import tracer
 from tracer.errors import SceneError
+from tracer.lights import env_radiance
 from tracer.readers.mitsuba import read_mitsuba_scene
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -273,35 +275,69 @@ ENV = """<emitter type="envmap"><string name="filename" value="env.exr"/><float 
         <transform name="to_world"><rotate x="0.957826285" y="0.287347886" angle="70"/></transform></emitter>"""
 
 
+@njit(cache=True)
+def _env_radiance_batch(lt, d):
+    out = np.zeros((d.shape[0], 3))
+    for i in range(d.shape[0]):
+        out[i] = env_radiance(lt, (d[i, 0], d[i, 1], d[i, 2]))
+    return out
+
+
 def test_envmap_rotation_and_scale_against_mitsuba(tmp_path):
     """A smooth lat-long map under a to_world rotation and scale 2: the tracer's environment
-    radiance at 500 of its pixels' centre directions equals Mitsuba 3's envmap eval along them to
-    float32 precision (both interpolate the same texels bilinearly there; detects the half-turn
-    between the two conventions, rows placed pole to pole or centred wrongly, a rotation applied the
-    wrong way, the scale dropped)."""
+    radiance along 500 random directions (between texel centres, and 100 more near the poles and
+    the map's seam) equals Mitsuba 3's envmap eval along them to float32 precision. Detects a
+    lookup that is not Mitsuba's bilinear one between texel centres (piecewise constant texels
+    differ by about 1% here), the half-turn between the two conventions, rows placed pole to pole
+    or centred wrongly, a rotation applied the wrong way, the scale dropped."""
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("scalar_rgb")
     from tracer.imageio import write_image
-    from tracer.lights import env_dir, env_uv
+    from tracer.lights import build_lights
 
     h, w = 64, 128
     v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
     img = np.stack([1 + 0.5 * np.sin(2 * np.pi * u), 1 + np.cos(np.pi * v), 1 + 0.3 * np.sin(4 * np.pi * u) * v], -1)
     write_image(str(tmp_path / "env.exr"), img.astype(np.float32))
     path = _scene(tmp_path, ENV)
-    env = read_mitsuba_scene(path, None).environment
+    lt = build_lights(tracer.load_scene(path))
     emitter = mi.load_file(path).emitters()[0]
     rng = np.random.default_rng(1)
-    ours, theirs = [], []
-    for j, i in zip(rng.integers(0, h, 500), rng.integers(0, w, 500)):
-        d = np.array(env_dir((i + 0.5) / w, (j + 0.5) / h))
-        uu, vv = env_uv(d)
-        assert (int(uu * w), int(vv * h)) == (i, j)
-        ours.append(env.image[j, i])
-        si = mi.SurfaceInteraction3f()
-        si.wi = mi.Vector3f(*(-d))
+    d = rng.normal(size=(600, 3))
+    d[500:550, 1] = 40.0 * np.sign(d[500:550, 1])  # near the poles
+    r = np.array(emitter.world_transform().matrix)[:3, :3]
+    d[550:] = (r @ np.array([np.sin(2 * np.pi * 1e-4 * rng.normal(size=50)), rng.uniform(-0.9, 0.9, 50),
+                             -np.ones(50)])).T  # across the seam u = 0 of the map's frame
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    ours = _env_radiance_batch(lt, d)
+    si = mi.SurfaceInteraction3f()
+    theirs = []
+    for x in d:
+        si.wi = mi.Vector3f(*(-x))
         theirs.append(np.array(emitter.eval(si)))
-    np.testing.assert_allclose(np.array(ours), np.array(theirs), rtol=1e-5)
+    np.testing.assert_allclose(ours, np.array(theirs), rtol=2e-5)
+
+
+def test_an_8_bit_envmap_is_decoded_from_srgb_as_mitsuba_does(tmp_path):
+    """An envmap stored as an 8-bit PNG: the tracer's radiance along 200 random directions equals
+    Mitsuba 3's eval (which decodes 8-bit images from sRGB, as for textures). Detects the encoded
+    values taken as linear radiance (about 30% too bright in the mid-tones)."""
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    from tracer.lights import build_lights
+
+    tracer.write_image(str(tmp_path / "env.png"), np.random.default_rng(2).uniform(0.02, 1.0, (8, 16, 3)))
+    path = _scene(tmp_path, ENV.replace("env.exr", "env.png"))
+    lt = build_lights(tracer.load_scene(path))
+    emitter = mi.load_file(path).emitters()[0]
+    d = np.random.default_rng(3).normal(size=(200, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    si = mi.SurfaceInteraction3f()
+    theirs = []
+    for x in d:
+        si.wi = mi.Vector3f(*(-x))
+        theirs.append(np.array(emitter.eval(si)))
+    np.testing.assert_allclose(_env_radiance_batch(lt, d), np.array(theirs), rtol=2e-5)
 
 
 # --- what it does not read, and bad input --------------------------------------------------------

@@ -5,6 +5,13 @@ point is drawn uniformly by area. The environment is one more light, chosen with
 probability in proportion to its power through the scene's bounding sphere; a constant
 environment is sampled uniformly over the sphere, a map by luminance x sin(theta) (2D CDF).
 
+Maps come in the two conventions of tracer.scene.Environment. ENV_MAP (the tracer's, OBJ
+sidecars): radiance constant over each texel, sampled texel by texel. ENV_BILINEAR (Mitsuba 3's
+`envmap`, from Mitsuba XML): the direction is turned into the map's frame (env_rot), the radiance
+interpolated bilinearly between texel centres (columns periodic, rows from pole to pole), and
+directions are sampled over the (H - 1) x W cells between those centres, each cell in proportion
+to the mean luminance of its four corners x sin(theta) at its middle, uniformly in (u, v) within it.
+
 Emission is one-sided: a triangle emits from the side of its counter-clockwise normal.
 All pdfs returned here are per unit solid angle at the receiving point.
 
@@ -32,6 +39,7 @@ from .sampling import (
 ENV_NONE = 0
 ENV_CONSTANT = 1
 ENV_MAP = 2
+ENV_BILINEAR = 3
 
 
 class Lights(NamedTuple):
@@ -45,10 +53,11 @@ class Lights(NamedTuple):
     radiance: np.ndarray  # (L, 3) float64 emitted radiance
     light_of_tri: np.ndarray  # (F,) int64: emissive index of a triangle, -1 if it does not emit
     p_env: float  # probability of choosing the environment
-    env_type: int  # ENV_NONE, ENV_CONSTANT, ENV_MAP
+    env_type: int  # ENV_NONE, ENV_CONSTANT, ENV_MAP, ENV_BILINEAR
     env_const: np.ndarray  # (3,) constant radiance
     env_map: np.ndarray  # (H, W, 3) radiance, (1,1,3) zeros if no map
-    env_cond_func: np.ndarray  # 2D distribution tables over the map (u along columns)
+    env_rot: np.ndarray  # (3, 3) world -> map frame (ENV_BILINEAR; identity otherwise)
+    env_cond_func: np.ndarray  # 2D distribution tables over the map's texels (ENV_MAP) or cells
     env_cond_cdf: np.ndarray
     env_marg_func: np.ndarray
     env_marg_cdf: np.ndarray
@@ -78,9 +87,20 @@ def build_lights(scene):
     env_type, env_power = ENV_NONE, 0.0
     env_const = np.zeros(3)
     env_map = np.zeros((1, 1, 3))
+    env_rot = np.eye(3)
     tables = build_distribution_2d(np.ones((1, 1)))
     radius = 0.5 * float(np.linalg.norm(scene.bounds[1] - scene.bounds[0]))
-    if env is not None and env.image is not None:
+    if env is not None and env.image is not None and env.convention == "mitsuba":
+        env_type, env_map = ENV_BILINEAR, np.ascontiguousarray(env.image, dtype=np.float64)
+        if env.to_world is not None:  # a rotation: its inverse is its transpose
+            env_rot = np.ascontiguousarray(np.asarray(env.to_world, dtype=np.float64).T)
+        cells = bilinear_cells(env_map)
+        tables = build_distribution_2d(cells)
+        h = env_map.shape[0]
+        sin_mid = np.sin(np.pi * (np.arange(h - 1) + 0.5) / (h - 1))
+        mean_rad = float(cells.sum() / max(sin_mid.sum() * env_map.shape[1], 1e-300))
+        env_power = math.pi * radius * radius * math.pi * mean_rad
+    elif env is not None and env.image is not None:
         env_type, env_map = ENV_MAP, np.ascontiguousarray(env.image, dtype=np.float64)
         h, w = env_map.shape[:2]
         sin_theta = np.sin(np.pi * (np.arange(h) + 0.5) / h)
@@ -111,8 +131,20 @@ def build_lights(scene):
         int(env_type),
         env_const,
         env_map,
+        env_rot,
         *tables,
     )
+
+
+def bilinear_cells(env_map):
+    """(H - 1, W) sampling weights of an ENV_BILINEAR map (H, W, 3): the cell between rows y, y + 1
+    and columns x, x + 1 (mod W) weighs the mean luminance of its four corners times sin(theta) at
+    its middle; positive wherever the bilinear radiance is."""
+    lum = luminance(env_map)
+    h = lum.shape[0]
+    corners = lum[:-1] + lum[1:]
+    cells = 0.25 * (corners + np.roll(corners, -1, axis=1))
+    return cells * np.sin(np.pi * (np.arange(h - 1) + 0.5) / (h - 1))[:, None]
 
 
 # --- Environment directions <-> map coordinates -------------------------------------------
@@ -133,10 +165,53 @@ def env_dir(u, v):
 
 
 @jit(inline="always")
+def env_cell_uv(lt, d):
+    """(u, v) of world direction d in an ENV_BILINEAR map's cell grid: u = 0 at the first column's
+    centre (periodic, in [0, 1)), v = 0 at the top row (straight up in the map's frame)."""
+    r = lt.env_rot
+    x = r[0, 0] * d[0] + r[0, 1] * d[1] + r[0, 2] * d[2]
+    y = r[1, 0] * d[0] + r[1, 1] * d[1] + r[1, 2] * d[2]
+    z = r[2, 0] * d[0] + r[2, 1] * d[1] + r[2, 2] * d[2]
+    n = math.sqrt(x * x + y * y + z * z)
+    u = math.atan2(x, -z) * (0.5 / math.pi) - 0.5 / lt.env_map.shape[1]
+    v = math.acos(min(max(y / n, -1.0), 1.0)) / math.pi if n > 0.0 else 0.0
+    return u - math.floor(u), v
+
+
+@jit(inline="always")
+def env_cell_dir(lt, u, v):
+    """The world direction of cell coordinates (u, v) (env_cell_uv's inverse)."""
+    theta = math.pi * v
+    phi = 2.0 * math.pi * (u + 0.5 / lt.env_map.shape[1])
+    st = math.sin(theta)
+    x, y, z = st * math.sin(phi), math.cos(theta), -st * math.cos(phi)
+    r = lt.env_rot  # its transpose turns the map's frame back to the world
+    return (r[0, 0] * x + r[1, 0] * y + r[2, 0] * z, r[0, 1] * x + r[1, 1] * y + r[2, 1] * z,
+            r[0, 2] * x + r[1, 2] * y + r[2, 2] * z)
+
+
+@jit(inline="always")
 def env_radiance(lt, d):
     """Radiance arriving from direction d (a ray that left the scene along d)."""
     if lt.env_type == ENV_CONSTANT:
         return lt.env_const[0], lt.env_const[1], lt.env_const[2]
+    if lt.env_type == ENV_BILINEAR:
+        u, v = env_cell_uv(lt, d)
+        h = lt.env_map.shape[0]
+        w = lt.env_map.shape[1]
+        x = u * w
+        y = v * (h - 1)
+        ix = min(int(x), w - 1)
+        iy = min(int(y), h - 2)
+        fx = x - ix
+        fy = y - iy
+        ix1 = ix + 1 if ix + 1 < w else 0
+        m = lt.env_map
+        w00, w01 = (1.0 - fy) * (1.0 - fx), (1.0 - fy) * fx
+        w10, w11 = fy * (1.0 - fx), fy * fx
+        return (w00 * m[iy, ix, 0] + w01 * m[iy, ix1, 0] + w10 * m[iy + 1, ix, 0] + w11 * m[iy + 1, ix1, 0],
+                w00 * m[iy, ix, 1] + w01 * m[iy, ix1, 1] + w10 * m[iy + 1, ix, 1] + w11 * m[iy + 1, ix1, 1],
+                w00 * m[iy, ix, 2] + w01 * m[iy, ix1, 2] + w10 * m[iy + 1, ix, 2] + w11 * m[iy + 1, ix1, 2])
     if lt.env_type == ENV_MAP:
         u, v = env_uv(d)
         h = lt.env_map.shape[0]
@@ -152,8 +227,11 @@ def env_pdf(lt, d):
     """Solid-angle pdf of choosing the environment and then direction d."""
     if lt.env_type == ENV_CONSTANT:
         return lt.p_env * INV_4PI
-    if lt.env_type == ENV_MAP:
-        u, v = env_uv(d)
+    if lt.env_type == ENV_MAP or lt.env_type == ENV_BILINEAR:
+        if lt.env_type == ENV_MAP:
+            u, v = env_uv(d)
+        else:
+            u, v = env_cell_uv(lt, d)
         st = math.sin(math.pi * v)
         if st <= 0.0:
             return 0.0
@@ -203,7 +281,7 @@ def sample_light(lt, tri, x, u_sel, u0, u1):
         st = math.sin(math.pi * sv)
         if st <= 0.0 or p <= 0.0:
             return (0.0, 0.0, 1.0), np.inf, (0.0, 0.0, 0.0), 0.0, -1
-        wi = env_dir(su, sv)
+        wi = env_dir(su, sv) if lt.env_type == ENV_MAP else env_cell_dir(lt, su, sv)
         rad = env_radiance(lt, wi)
         return wi, np.inf, rad, lt.p_env * p / (2.0 * math.pi * math.pi * st), -1
     # A triangle, by power, then a point by area

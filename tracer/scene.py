@@ -46,13 +46,19 @@ class Materials:
 class Environment:
     """Light from infinitely far away: a constant radiance or an equirectangular map.
 
-    Map convention (+y up): u = 0.5 + atan2(d.x, -d.z) / (2 pi), v = acos(d.y) / pi,
-    row 0 of the image at v = 0 (straight up).
+    A map is looked up by one of two conventions (tracer.lights: ENV_MAP, ENV_BILINEAR):
+    "tracer" (OBJ sidecars), piecewise constant over texels, u = 0.5 + atan2(d.x, -d.z) / (2 pi),
+    v = acos(d.y) / pi, row 0 of the image at v = 0 (straight up); "mitsuba" (a Mitsuba `envmap`),
+    Mitsuba 3's: the direction turned into the map's frame by the inverse of `to_world`, there
+    u = atan2(d.x, -d.z) / (2 pi), v = acos(d.y) / pi, bilinear between texels, column x centred at
+    u = (x + 1/2) / W (periodic), row y at v = y / (H - 1) (rows from pole to pole).
     """
 
     radiance: np.ndarray  # (3,) float64, constant term (zero when a map is used)
     image: np.ndarray | None = None  # (H, W, 3) float64 radiance (already scaled), or None
     path: str | None = None
+    convention: str = "tracer"  # how the map is looked up: "tracer" or "mitsuba" (above)
+    to_world: np.ndarray | None = None  # (3, 3) rotation, map frame -> world ("mitsuba"; None: identity)
 
     def __repr__(self):
         if self.image is not None:

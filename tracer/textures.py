@@ -69,16 +69,16 @@ def srgb_decode(x, dtype=np.float32):
     return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(dtype)
 
 
-def read_texture(path, gamma=0.0):
+def read_texture(path, gamma=0.0, what="texture"):
     """(H, W, 3) float32 linear RGB of an image file: 8/16-bit formats decoded from sRGB (gamma 0
     or -1) or by the power law v^gamma (gamma > 0; 1: stored linear, as Mitsuba's `gamma` and
     `raw` say), float formats as they are; grey images repeated to RGB, alpha dropped. Raises
-    SceneError naming the file."""
+    SceneError naming the file (and `what` it is)."""
     import OpenImageIO as oiio
 
     from .imageio import read_image
 
-    img = read_image(path, what="texture")
+    img = read_image(path, what=what)
     inp = oiio.ImageInput.open(path)
     integer = True
     if inp is not None:
@@ -87,7 +87,7 @@ def read_texture(path, gamma=0.0):
     c = img.shape[2]
     rgb = np.repeat(img[:, :, :1], 3, axis=2) if c < 3 else img[:, :, :3]
     if not np.all(np.isfinite(rgb)):
-        raise SceneError(f"{path}: texture holds non-finite values")
+        raise SceneError(f"{path}: {what} holds non-finite values")
     if integer and gamma > 0.0:
         return np.ascontiguousarray(np.power(np.clip(rgb, 0.0, None), gamma), dtype=np.float32)
     return srgb_decode(rgb) if integer else np.ascontiguousarray(rgb, dtype=np.float32)

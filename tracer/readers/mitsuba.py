@@ -367,9 +367,10 @@ class _Reader:
         self.done(el, p)
 
     def envmap(self, el, p):
-        """An `envmap` emitter as the tracer's Environment: the image (times `scale`) resampled onto
-        the tracer's lat-long grid, bilinearly, through `to_world`'s rotation."""
-        from ..imageio import read_image
+        """An `envmap` emitter as the tracer's Environment in Mitsuba 3's convention (looked up as
+        Mitsuba 3 does, tracer.scene.Environment): the image (8- and 16-bit files decoded from
+        sRGB) times `scale`, and `to_world`'s rotation (its columns normalised)."""
+        from ..textures import read_texture
 
         if "filename" not in p:
             raise SceneError(f"{self.where(el)}: envmap without a filename")
@@ -377,13 +378,17 @@ class _Reader:
         if not os.path.isfile(file):
             self.missing(el, "environment map", file, "the scene renders without it")
             return None
-        img = read_image(file, what="environment map").astype(np.float64)
-        img = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img[:, :, :3]
+        # as Mitsuba 3 converts it: 8- and 16-bit images decoded from sRGB, grey to RGB, alpha dropped
+        img = read_texture(file, what="environment map").astype(np.float64)
         img = img * (self.number(p["scale"]) if "scale" in p else 1.0)
         if not np.all(np.isfinite(img)) or img.min() < 0.0:
             raise SceneError(f"{file}: environment map has negative or non-finite pixels")
+        if img.shape[0] < 3 or img.shape[1] < 2:
+            raise SceneError(f"{file}: an environment map needs at least 2x3 pixels (Mitsuba 3's limit), "
+                             f"got {img.shape[1]}x{img.shape[0]}")
         m = self.matrix(p["to_world"]) if "to_world" in p else np.eye(4)
-        return Environment(np.zeros(3), resample_envmap(img, m[:3, :3]), file)
+        rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+        return Environment(np.zeros(3), img, file, convention="mitsuba", to_world=rot)
 
     def rgb(self, el):
         if el.tag == "float":
@@ -861,28 +866,4 @@ def read_mitsuba_scene(path, defines=None, allow_missing=False):
     <default> values as `mitsuba -D name=value` does; allow_missing turns a missing mesh, texture
     or environment map into a warning (the shape left out, the texture a constant)."""
     return _Reader(path, defines, allow_missing).read()
-
-
-def resample_envmap(img, rot):
-    """An equirectangular image in Mitsuba's envmap convention, turned by rot (3x3, to_world),
-    resampled bilinearly onto the tracer's grid (tracer.lights.env_uv), same size.
-
-    Mitsuba's local direction of (u, v) is (sin phi sin theta, cos theta, -cos phi sin theta) with
-    phi = 2 pi u, theta = pi v, column x centred at u = (x + 1/2) / W, row y at v = y / (H - 1);
-    the tracer's u is half a turn further (phi = 2 pi (u - 1/2)), its rows centred."""
-    h, w = img.shape[:2]
-    v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
-    theta, phi = np.pi * v, 2.0 * np.pi * (u - 0.5)
-    d = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), -np.sin(theta) * np.cos(phi)], axis=-1)
-    r = rot / np.linalg.norm(rot, axis=0)  # its rotation (columns normalised)
-    loc = d @ np.linalg.inv(r).T
-    mu = (np.arctan2(loc[..., 0], -loc[..., 2]) / (2.0 * np.pi)) % 1.0
-    mv = np.arccos(np.clip(loc[..., 1], -1.0, 1.0)) / np.pi
-    x, y = mu * w - 0.5, mv * (h - 1.0)  # Mitsuba: columns texel-centred, rows from pole to pole
-    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
-    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
-    x0, x1 = x0 % w, (x0 + 1) % w
-    y1 = np.minimum(y0 + 1, h - 1)
-    return ((img[y0, x0] * (1 - fx) + img[y0, x1] * fx) * (1 - fy)
-            + (img[y1, x0] * (1 - fx) + img[y1, x1] * fx) * fy)
 
