@@ -3,6 +3,10 @@
     python -m bench.vs_mitsuba --scene-dir ../shared/scenes-mitsuba --scenes cornell-box,veach-mis \\
         --width 320 --height 180 --spp 64 --seeds 4 --out bench/summary/mitsuba_scenes/table.md
     python -m bench.vs_mitsuba path/to/scene.xml --spp 256
+    python -m bench.vs_mitsuba envlit --width 64 --height 48 --spp 32 --seeds 4   # or envlit-mask, ...
+
+A scene argument that is not a file names a generated scene: `envlit` (every variant of
+bench.scenes_envlit, the environment-lit interior, one feature added at a time) or `envlit-<variant>`.
 
 Mitsuba 3 renders a copy of each file that it can load (`mitsuba_copy`: what it rejects is dropped
 or mapped the way the tracer reads it, e.g. 0.6's `extEta` folded into eta and k, `gamma` on a
@@ -24,6 +28,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 import tracer
+from bench import scenes_envlit
 from bench.atomic import write_text
 from tracer.metals import METALS
 from tracer.textures import srgb_decode
@@ -163,9 +168,22 @@ def compare(ours, theirs):
     return out
 
 
+def scene_paths(name):
+    """The scene XML files an argument names: a file itself, or a generated scene (module docstring),
+    written into bench/results/scenes."""
+    if os.path.isfile(name):
+        return [name]
+    if name == "envlit":
+        return [scenes_envlit.scene(v) for v in scenes_envlit.VARIANTS]
+    if name.startswith("envlit-") and name[len("envlit-"):] in scenes_envlit.VARIANTS:
+        return [scenes_envlit.scene(name[len("envlit-"):])]
+    raise SystemExit(f"bench.vs_mitsuba: {name}: no such file, nor a generated scene (envlit, "
+                     f"{', '.join('envlit-' + v for v in scenes_envlit.VARIANTS)})")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("scene", nargs="*", help="scene XML files")
+    ap.add_argument("scene", nargs="*", help="scene XML files, or generated scenes by name (envlit, envlit-mask, ...)")
     ap.add_argument("--scene-dir", help="a folder of <name>/scene.xml")
     ap.add_argument("--scenes", help="comma-separated names under --scene-dir (default: all)")
     ap.add_argument("--width", type=int, default=320)
@@ -174,7 +192,7 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=4, help="renders per side (standard errors from their spread)")
     ap.add_argument("--out", help="write the table (markdown) here")
     a = ap.parse_args(argv)
-    paths = list(a.scene)
+    paths = [p for name in a.scene for p in scene_paths(name)]
     if a.scene_dir:
         names = a.scenes.split(",") if a.scenes else sorted(
             n for n in os.listdir(a.scene_dir) if os.path.isfile(os.path.join(a.scene_dir, n, "scene.xml")))
