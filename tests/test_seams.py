@@ -309,6 +309,56 @@ def test_pss_dims_follow_the_dimension_table():
         pss_dims(-1)
 
 
+def _imported_modules(path, package):
+    """The absolute names of the modules a source file imports (relative imports resolved against
+    `package`, the file's own package), wherever in the file the import stands."""
+    import ast
+
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = package.split(".")[:len(package.split(".")) - node.level + 1] if node.level else []
+            module = ".".join(base + ([node.module] if node.module else []))
+            found.add(module)
+            found.update(f"{module}.{a.name}" for a in node.names)  # `from .. import integrators`
+    return found
+
+
+def _layer_violations(folder, forbidden):
+    """(file, module) for each import under tracer/`folder` of a module in or under `forbidden`."""
+    import pathlib
+
+    root = pathlib.Path(tracer.__file__).parent
+    bad = []
+    for path in sorted((root / folder).rglob("*.py")):
+        package = ".".join(("tracer",) + path.relative_to(root).parent.parts)
+        for module in _imported_modules(path, package):
+            if any(module == f or module.startswith(f + ".") for f in forbidden):
+                bad.append((str(path.relative_to(root)), module))
+    return bad
+
+
+def test_guides_import_nothing_of_an_integrator(tmp_path):
+    """A guide reaches the path engine through the session (session.trace_source, the Session its
+    schedule is given), never through an integrator: no module under tracer/guiding imports
+    tracer.integrators or tracer.gradient, at top level or inside a function. The import scan is
+    checked on a planted file first, so a scan that finds nothing cannot pass."""
+    planted = tmp_path / "warm.py"
+    planted.write_text("def warm_up(ctx):\n    from ...integrators.path import trace_wave\n"
+                       "    from ... import gradient\n")
+    mods = _imported_modules(planted, "tracer.guiding.pss")
+    assert {"tracer.integrators.path", "tracer.gradient"} <= mods
+    assert _layer_violations("guiding", ("tracer.integrators", "tracer.gradient")) == []
+
+
+def test_the_renderer_imports_nothing_of_learn_bench_or_tests():
+    """tracer never imports learn, bench or tests (DESIGN.md's layout): the installed package runs
+    without them."""
+    assert _layer_violations(".", ("learn", "bench", "tests")) == []
+
+
 def _names(bundle, prefix="", special=None):
     special = special or {}
     return [special.get(f, prefix + f) for f in bundle._fields]

@@ -231,13 +231,12 @@ class PSSGuide(Guide):
 
         torch.optim.Adam([torch.zeros(1, requires_grad=True)])
 
-        from ...integrators.path import trace_wave
+        from ...session import trace_source
         from ...sources import PrimarySampleSource
-        from ...wave import Stats, WaveBuffers
 
         dims = pss_dims(1)
         src = PrimarySampleSource(np.full((1, dims.shape[0]), 0.5), dims, whole_image=True)
-        trace_wave(ctx, WaveBuffers(1), src, Film(int(ctx.crop[2]), int(ctx.crop[3])), 0, 0, 1, Stats())
+        trace_source(ctx, src, Film(int(ctx.crop[2]), int(ctx.crop[3])))
 
     # the render's passes
     def schedule(self, session):
