@@ -6,7 +6,7 @@
     python -m bench.throughput --vs-mitsuba          # side by side with Mitsuba 3 (optional extra)
     python -m bench.throughput --vs-mitsuba --scenes staircase --width 320 --height 180 --path-loops thread,wave
     python -m bench.throughput --load                # load_scene of the 1.3M-triangle OBJ: time, peak RSS
-    python -m bench.throughput --json bench/results/throughput.json
+    python -m bench.throughput --json out/throughput.json   # the records elsewhere
 
 Scene names besides paths (bench.scenes, written on first use into bench/results/scenes):
 `open-1k` and `open-1m` (an icosphere of 1280 or 1.31M triangles on a floor under a quad light),
@@ -21,6 +21,9 @@ run to run). With --vs-mitsuba, each renderer (ours once per path loop) runs in 
 own (bench.throughput_worker), loads the scene and renders once untimed, then they alternate
 `--repeat` times; the ratio is of the medians. Mitsuba's LLVM
 backend needs a recent libLLVM (Dr.Jit aborts with LLVM 14 or 15): point DRJIT_LIBLLVM_PATH at one.
+
+The records go to bench/results/throughput.json (with --vs-mitsuba throughput_vs_mitsuba.json,
+with --load throughput_load.json), or to --json, written atomically.
 """
 import argparse
 import json
@@ -40,6 +43,7 @@ NAMED = {"open-1k": lambda: scenes.open_scene(3), "open-1m": lambda: scenes.open
          "staircase": lambda: {"obj": STAIRCASE, "parts": None}}
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RESULTS = os.path.join(ROOT, "bench", "results")
 CORNELL = os.path.join(ROOT, "scenes", "cornell", "cornell.obj")
 STAIRCASE = os.path.join(os.path.dirname(ROOT), "shared", "scenes-mitsuba", "staircase", "scene.xml")
 
@@ -210,7 +214,8 @@ def main(argv=None):
     p.add_argument("--threads", type=int, default=None)
     p.add_argument("--path-loops", default="thread", help="comma-separated: thread (per-thread loop), wave (wavefront)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per scene and accel (best is reported)")
-    p.add_argument("--json", default=None, help="also write the records to this file")
+    p.add_argument("--json", default=None, help="write the records to this file (default: bench/results/"
+                                                "throughput.json, throughput_vs_mitsuba.json or throughput_load.json)")
     p.add_argument("--vs-mitsuba", action="store_true",
                    help="render side by side with Mitsuba 3 (default scenes: mitsuba-cornell,open-1k,open-1m)")
     p.add_argument("--load", action="store_true", help="time load_scene of open-1m (and Mitsuba's load, if present)")
@@ -253,10 +258,17 @@ def main(argv=None):
             print("    trace by step (cycle shares): "
                   + ", ".join(f"{k} {v:.2f}s" for k, v in row["trace_parts"].items()))
     stage_table([r for r in rows if "accel" in r])
-    if a.json:
-        os.makedirs(os.path.dirname(os.path.abspath(a.json)), exist_ok=True)
-        atomic.write_json(a.json, rows, indent=1)  # a temporary file renamed into place
+    out = a.json or default_json(a)
+    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+    atomic.write_json(out, rows, indent=1)  # a temporary file renamed into place
+    print(f"records: {out}")
     return 0
+
+
+def default_json(a):
+    """Where the records of a run with arguments `a` go without --json: bench/results/, by mode."""
+    name = "throughput_load" if a.load else "throughput_vs_mitsuba" if a.vs_mitsuba else "throughput"
+    return os.path.join(RESULTS, name + ".json")
 
 
 if __name__ == "__main__":

@@ -45,6 +45,21 @@ def test_throughput_rows(tmp_path, monkeypatch, capsys):
     assert rows[1]["stages"]["trace"] == 0
 
 
+def test_throughput_writes_its_records_without_json(tmp_path, monkeypatch, capsys):
+    """Without --json the records go to bench/results/throughput.json (here a temporary RESULTS),
+    whole, and the run says where. Detects a run that writes nothing unless asked."""
+    monkeypatch.setattr(scenes, "FOLDER", str(tmp_path / "scenes"))
+    monkeypatch.setattr(throughput, "RESULTS", str(tmp_path / "results"))
+    monkeypatch.setitem(throughput.NAMED, "open-tiny", lambda: scenes.open_scene(1))
+    assert throughput.main(["--scenes", "open-tiny", "--accels", "embree", "--spp", "1", "--repeat", "1",
+                            "--width", "8", "--height", "8"]) == 0
+    out = tmp_path / "results" / "throughput.json"
+    assert f"records: {out}" in capsys.readouterr().out
+    rows = json.loads(out.read_text())
+    assert len(rows) == 1 and rows[0]["width"] == 8 and rows[0]["spp"] == 1
+    assert [f.name for f in out.parent.iterdir()] == ["throughput.json"]  # no temporary file left
+
+
 def test_worker_renders_in_its_own_process(tmp_path, monkeypatch):
     """bench.throughput --vs-mitsuba's worker protocol, our side: the child loads the scene, says
     it is ready with the scene's size, then renders once per seed sent, and each reply counts

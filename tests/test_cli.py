@@ -157,12 +157,37 @@ def test_missing_texture_is_a_warning(tmp_path, capsys):
     assert "lamp.mtl" in missing[0] and "not found" in missing[0]
 
 
-def test_undefined_material_without_light_is_one_line(tmp_path, capsys):
-    """A 0-byte MTL: the warning that 'lamp' is not defined is held back, and the one error line
-    says what the scene lacks and why."""
+def test_undefined_material_without_light_names_the_cause(tmp_path, capsys):
+    """A 0-byte MTL: the warning that 'lamp' is not defined comes first, and the error line (the
+    last) says what the scene lacks and why."""
     obj = scenes.light_quad(tmp_path, (1, 1, 1))
     (tmp_path / "lamp.mtl").write_text("")
-    fails_with(capsys, [obj, "-o", tmp_path / "o.exr"], "lamp.obj", "no light", "'lamp' not defined in lamp.mtl")
+    code, out, err = run_cli(capsys, obj, "-o", tmp_path / "o.exr")
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2 and len(lines) == 2, (code, lines)
+    assert lines[0].startswith("tracer: warning: ") and "'lamp'" in lines[0]
+    for frag in ("lamp.obj", "no light", "'lamp' not defined in lamp.mtl"):
+        assert frag in lines[1], (frag, lines[1])
+
+
+def test_warnings_print_before_the_failure_they_explain(tmp_path, capsys):
+    """A Mitsuba scene lit by a `point` emitter alone: the warning that the emitter is not supported
+    comes on stderr before the error line "the scene has no light", which is the last line, and the
+    run exits with 2. Detects held warnings dropped (or printed after the error) when a run fails."""
+    xml = tmp_path / "point.xml"
+    xml.write_text("""<scene version="3.0.0">
+        <sensor type="perspective"><transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
+        </transform><film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
+        </sensor>
+        <shape type="rectangle"/>
+        <emitter type="point"><point name="position" x="0" y="0" z="2"/><rgb name="intensity" value="5"/></emitter>
+    </scene>""")
+    code, out, err = run_cli(capsys, xml, "-o", tmp_path / "o.exr")
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2, (code, err)
+    assert len(lines) == 2 and "Traceback" not in err, lines
+    assert lines[0].startswith("tracer: warning: ") and "'point' is not supported" in lines[0]
+    assert lines[1].startswith("tracer: ") and "point.xml" in lines[1] and "no light" in lines[1]
 
 
 @pytest.mark.parametrize("line,what", [("v 1 2\n", "malformed vertex"), ("v 1 nan 2\n", "not finite"),
@@ -348,7 +373,116 @@ def test_list_guides(capsys):
     assert list(blocks) == list(guide_names())
     for name in guide_names():
         expected = [f"{k} = {v}" for k, v in sorted(guide_settings(name).items())] or ["(no settings)"]
-        assert blocks[name] == expected, name
+        assert [re.split(r"\s{2,}", line)[0] for line in blocks[name]] == expected, name
+
+
+@pytest.mark.parametrize("flag", ["--list-guides", "--list-integrators"])
+def test_every_listed_setting_says_what_it_means(capsys, flag):
+    """Each setting of every guide and integrator is printed with a line of meaning after its
+    default, and tracer.setting_meanings names no setting that does not exist. Detects a setting
+    added without its meaning (or a meaning left behind by a removed or renamed setting)."""
+    from tracer import setting_meanings
+    from tracer.guiding import REGISTRY as GUIDES, guide_settings
+    from tracer.integrators import REGISTRY as INTEGRATORS, integrator_settings
+
+    if flag == "--list-guides":
+        table, settings = setting_meanings.GUIDES, {n: guide_settings(n) for n in GUIDES}
+    else:
+        table, settings = setting_meanings.INTEGRATORS, {n: integrator_settings(n) for n in INTEGRATORS}
+    assert set(table) == set(settings)
+    for name, defaults in settings.items():
+        assert set(table[name]) == set(defaults), (name, set(table[name]) ^ set(defaults))
+    code, out, err = run_cli(capsys, flag)
+    assert code == 0 and not err
+    rows = [re.split(r"\s{2,}", line.strip(), maxsplit=1) for line in out.splitlines()
+            if line.startswith("  ") and "(no settings)" not in line]
+    assert len(rows) == sum(len(d) for d in settings.values())
+    assert all(len(r) == 2 and len(r[1]) > 10 for r in rows), [r for r in rows if len(r) < 2 or len(r[1]) <= 10]
+
+
+def test_help_names_every_scene_format(capsys):
+    """--help names Mitsuba XML beside OBJ and JSON, and a folder given as the scene gets an error
+    that lists all three. Detects the help or the error leaving a format out."""
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "Render an OBJ or Mitsuba XML scene" in text and ".xml" in text and "scene.obj" in text
+    msg = fails_with(capsys, [ROOT], "not a scene file")
+    assert ".obj" in msg and ".json" in msg and ".xml" in msg
+
+
+def _mitsuba_box(folder, width=40, height=16):
+    """folder/scene.xml: a lit quad seen by a camera, a film of width x height."""
+    os.makedirs(folder, exist_ok=True)
+    path = os.path.join(folder, "scene.xml")
+    with open(path, "w") as f:
+        f.write(f"""<scene version="3.0.0">
+            <sensor type="perspective"><transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0"
+            up="0, 1, 0"/></transform><film type="hdrfilm"><integer name="width" value="{width}"/>
+            <integer name="height" value="{height}"/></film></sensor>
+            <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+        </scene>""")
+    return path
+
+
+def test_a_scene_called_scene_is_named_after_its_folder(tmp_path, capsys, monkeypatch):
+    """Without -o, folder/scene.xml (every Bitterli scene) writes <folder>.exr in the current
+    folder; other scenes keep their own name. Detects every Bitterli render writing scene.exr."""
+    from tracer.cli import default_output
+
+    assert default_output(os.path.join("..", "shared", "staircase", "scene.xml")) == "staircase.exr"
+    assert default_output(os.path.join("scenes", "cornell", "cornell.obj")) == "cornell.exr"
+    scene = _mitsuba_box(tmp_path / "lit-quad")
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_cli(capsys, scene, "--spp", 1, "--width", 8, "-q")
+    assert code == 0, err
+    assert (tmp_path / "lit-quad.exr").is_file() and (tmp_path / "lit-quad.json").is_file()
+    assert not (tmp_path / "scene.exr").exists()
+
+
+@pytest.mark.parametrize("size,expected", [({"width": 10}, (10, 4)), ({"height": 5}, (13, 5)),
+                                           ({"width": 1}, (1, 1)), ({"width": 9, "height": 9}, (9, 9))])
+def test_width_or_height_alone_keeps_the_aspect_ratio(tmp_path, size, expected):
+    """A 40x16 scene (OBJ with sidecar, and Mitsuba XML) given only a width or a height gets the
+    other side from the scene's aspect ratio, rounded to the nearest pixel, at least 1; both given
+    are taken as they are. Detects the other side kept at the scene's size (a 10x16 strip)."""
+    obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=40, height=16)
+    xml = _mitsuba_box(tmp_path / "xml")
+    for path in (obj, xml):
+        scene = tracer.load_scene(path, **size)
+        assert (scene.width, scene.height) == expected, path
+
+
+def test_cli_width_alone_keeps_the_aspect_ratio(tmp_path, capsys):
+    """`--width 10` on a 40x16 Mitsuba scene writes a 10x4 image."""
+    img, stats, _ = render_cli(capsys, tmp_path, "a", "--width", 10, scene=_mitsuba_box(tmp_path / "xml"), size=None,
+                               spp=1)
+    assert img.shape == (4, 10, 3) and (stats["width"], stats["height"]) == (10, 4)
+
+
+def test_summary_says_when_a_guide_trained_fewer_iterations(tmp_path, capsys):
+    """A grid render whose pilot uses up a tiny training share (train_budget 0.001 of --time 1)
+    trains no iteration: the summary and the stats JSON say so and why, and the JSON's count of
+    training passes agrees. A render that trains every iteration asked for says nothing. Detects
+    a guide that stops training with no word. The progress bar shows the phase once, as `pilot: 0
+    spp` (not `pilot: : 0 spp`)."""
+    def run(name, *args, quiet=True):
+        code, text, err = run_cli(capsys, CORNELL, "--width", 8, "--height", 8, *args, "-o", tmp_path / f"{name}.exr",
+                                  *(["-q"] if quiet else []))
+        assert code == 0, err
+        assert ": :" not in err and (quiet or "pilot: 0 spp" in err), err
+        return text, json.loads((tmp_path / f"{name}.json").read_text())
+
+    text, stats = run("short", "--guide", "grid:train_budget=0.001", "--time", 1, quiet=False)
+    training = stats["guide_stats"]["training"]
+    assert training["stopped"] == "train_budget" and training["iterations"] == 5
+    assert training["trained"] == sum(p["kind"] == "train" for p in stats["passes"]) == 0
+    assert "grid trained 0 of 5 iterations after its pilot: the training share was used up" in text
+    assert training["why"] in text
+    text, stats = run("full", "--guide", "grid:iterations=1", "--spp", 8)
+    assert stats["guide_stats"]["training"] == {"iterations": 1, "trained": 1, "stopped": None, "why": ""}
+    assert sum(p["kind"] == "train" for p in stats["passes"]) == 1
+    assert "trained" not in text, text
 
 
 def test_unknown_accel_and_option(capsys):
@@ -507,11 +641,15 @@ def test_sigint_writes_the_partial_image_and_exits_130(tmp_path):
     img = tracer.read_image(out)
     assert img.shape == (32, 32, 3) and np.isfinite(img).all() and img.mean() > 0
     assert (tmp_path / "i.png").is_file()
-    summary = re.search(r", (\d+) spp \(interrupted", stdout.decode())
+    summary = re.search(r", ([\d.]+) spp \(interrupted(; every pixel has at least (\d+))?\)", stdout.decode())
     assert summary, stdout
-    assert int(summary.group(1)) == round(stats["spp_mean"])
+    assert float(summary.group(1)) == round(stats["spp_mean"], 2)  # the JSON's figures, as they are there
+    assert summary.group(3) is None or int(summary.group(3)) == stats["spp"]
     shown = re.findall(r"(\d+)/1000000 spp", err)
-    assert shown and shown[-1] == summary.group(1), (shown[-3:], summary.group(1))
+    assert shown and int(shown[-1]) == round(stats["spp_mean"]), (shown[-3:], stats["spp_mean"])
+    cut = [p for p in stats["passes"] if p.get("interrupted")]  # the pass Ctrl-C stopped, with its paths
+    assert len(cut) == 1 and cut[0]["partial"] and 0 <= cut[0]["paths"] < cut[0]["spp"] * 32 * 32
+    assert stats["samples"] == sum(p.get("paths", p["spp"] * 32 * 32) for p in stats["passes"])
 
 
 def test_sigint_while_pss_learns_writes_the_candidate_image(tmp_path):

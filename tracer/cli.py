@@ -2,8 +2,9 @@
 
 Writes OUT.exr (linear), OUT.png (tonemapped sRGB preview) and OUT.json (statistics). User
 errors print one line `tracer: ...` and exit with code 2; Ctrl-C writes what was rendered and
-exits with 130. Warnings found while the input is checked are held back until it has passed, so
-that a run that fails prints its one error line alone.
+exits with 130. Warnings found while the input is checked (a scene's unsupported features) are
+held back until it has passed, so that they come after the compile notice; a run that then fails
+prints them before its error line, which is the last line on stderr.
 """
 import argparse
 import logging
@@ -27,8 +28,9 @@ def _parser():
     from .bvh import ACCELS
     from .guiding import guide_names
 
-    p = _Parser(prog="tracer", description="Render an OBJ scene with a Numba + Embree path tracer.")
-    p.add_argument("scene", nargs="?", help="scene.obj (with optional scene.json beside it) or a JSON scene file")
+    p = _Parser(prog="tracer", description="Render an OBJ or Mitsuba XML scene with a Numba + Embree path tracer.")
+    p.add_argument("scene", nargs="?", help="scene.obj (with optional scene.json beside it), a JSON scene file, or a "
+                                            "Mitsuba scene .xml (0.6 or 3)")
     p.add_argument("--guide", default="bsdf", help=f"bounce sampler: {', '.join(guide_names())} (default bsdf), "
                                                   "with settings as NAME:KEY=VALUE,... (e.g. photon:iterations=6)")
     p.add_argument("--guide-opt", action="append", default=[], metavar="KEY=VALUE",
@@ -56,8 +58,10 @@ def _parser():
     p.add_argument("--max-depth", type=int, help="-1 unlimited, 1 emitters only, 2 direct light, ...")
     p.add_argument("--rr-depth", type=int, help="Russian roulette from this depth on (default 5)")
     p.add_argument("--seed", type=int, help="random seed (default: the scene's, else 0)")
-    p.add_argument("--width", type=int, help="image width (default: the scene's)")
-    p.add_argument("--height", type=int, help="image height (default: the scene's)")
+    p.add_argument("--width", type=int, help="image width (default: the scene's; alone, the height keeps the "
+                                             "scene's aspect ratio)")
+    p.add_argument("--height", type=int, help="image height (default: the scene's; alone, the width keeps the "
+                                              "scene's aspect ratio)")
     p.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE",
                    help="set a Mitsuba scene XML's <default> NAME (as mitsuba -D); repeatable")
     p.add_argument("--allow-missing", action="store_true",
@@ -67,8 +71,8 @@ def _parser():
     p.add_argument("--crop", help="render only the window x0,y0,w,h of the image")
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--wave-size", type=int, default=None, help="paths per wave (memory vs overhead)")
-    p.add_argument("-o", "--output", help="output EXR (default: <scene name>.exr in the current folder; "
-                                          "a missing folder is created)")
+    p.add_argument("-o", "--output", help="output EXR (default: <scene name>.exr in the current folder, a "
+                                          "scene.xml taking its folder's name; a missing folder is created)")
     p.add_argument("--reference", help="reference EXR: print relMSE, MSE and 1-SSIM against it")
     p.add_argument("--exposure", type=float, default=0.0, metavar="EV",
                    help="stops added to the PNG preview's automatic exposure (default 0); the EXR is not changed")
@@ -76,7 +80,8 @@ def _parser():
                    help="also write <name>.variance.exr, the variance of each pixel's mean")
     p.add_argument("--denoise", nargs="?", const="high", default=None, metavar="QUALITY",
                    help="also write <name>.denoised.exr and its PNG: Intel Open Image Denoise with the albedo "
-                        "and normal buffers (quality high, balanced or fast; needs pip install -e \".[denoise]\")")
+                        "and normal buffers (quality high, the default, balanced or fast, as --denoise fast or "
+                        "--denoise=fast; needs pip install -e \".[denoise]\")")
     p.add_argument("-q", "--quiet", action="store_true",
                    help="no progress bar and no compile notice (the summary line is still printed)")
     p.add_argument("-v", "--verbose", action="store_true",
@@ -86,6 +91,30 @@ def _parser():
                    help="print the integrators, their settings and defaults")
     p.add_argument("--version", action="store_true", help="print the version and exit")
     return p
+
+
+def _denoise_quality(argv):
+    """argv with a bare `--denoise` (not followed by high, balanced or fast) written `--denoise=high`,
+    so that the optional quality never takes the scene (`--denoise scene.xml`)."""
+    from .denoise import QUALITIES
+
+    argv = list(argv)
+    end = argv.index("--") if "--" in argv else len(argv)
+    for i in range(end):
+        if argv[i] == "--denoise" and (i + 1 >= end or argv[i + 1] not in QUALITIES):
+            argv[i] = "--denoise=high"
+    return argv
+
+
+def default_output(scene):
+    """The EXR a render of `scene` writes without -o: <name>.exr in the current folder, where
+    name is the scene file's, or its folder's when the file is called `scene` (every Bitterli
+    scene is <name>/scene.xml)."""
+    path = os.path.abspath(scene)
+    name = os.path.splitext(os.path.basename(path))[0]
+    if name == "scene":
+        name = os.path.basename(os.path.dirname(path)) or name
+    return name + ".exr"
 
 
 def _crop(text):
@@ -169,9 +198,11 @@ def _read_reference(path):
     return ref
 
 
-def _list_methods(entries, flag):
+def _list_methods(entries, flag, meanings):
     """Print each (name, class or None, doc if None, {setting: default}): the first paragraph of its
-    docstring, and its settings."""
+    docstring, and its settings with their defaults and what they mean (tracer.setting_meanings)."""
+    from .setting_meanings import meaning
+
     for name, factory, doc, settings in entries:
         if factory is not None:
             doc = " ".join(line.strip() for line in re.split(r"\n\s*\n", (factory.__doc__ or "").strip())[0].splitlines())
@@ -179,21 +210,26 @@ def _list_methods(entries, flag):
         print(f"{name}: {doc}")
         if not settings:
             print("  (no settings)")
-        for key, value in sorted(settings.items()):
-            print(f"  {key} = {value}")
+        rows = [(f"{key} = {value}", meaning(meanings, name, key)) for key, value in sorted(settings.items())]
+        width = max((len(r[0]) for r in rows), default=0)
+        for setting, text in rows:
+            print(f"  {setting:<{width}}  {text}".rstrip())
 
 
 def _list_guides():
     from .guiding import REGISTRY, guide_settings
+    from .setting_meanings import GUIDES
 
     _list_methods([(name, factory, "BSDF importance sampling only (no guide).", guide_settings(name))
-                   for name, (factory, _) in REGISTRY.items()], "guide")
+                   for name, (factory, _) in REGISTRY.items()], "guide", GUIDES)
 
 
 def _list_integrators():
     from .integrators import REGISTRY, integrator_settings
+    from .setting_meanings import INTEGRATORS
 
-    _list_methods([(name, cls, "", integrator_settings(name)) for name, cls in REGISTRY.items()], "integrator")
+    _list_methods([(name, cls, "", integrator_settings(name)) for name, cls in REGISTRY.items()], "integrator",
+                  INTEGRATORS)
 
 
 def _compile_notice(guide, accel):
@@ -215,8 +251,9 @@ def _note(text):
 
 class _Warnings(logging.Handler):
     """The tracer's warnings as `tracer: warning: ...` lines on stderr (with -v, its notes as
-    `tracer: note: ...` too), held back while `hold` (until the input has been checked) and
-    dropped if the run then fails on bad input."""
+    `tracer: note: ...` too), held back while `hold` (until the input has been checked), and
+    shown before the error line if the run then fails on bad input (what the scene lacked is often
+    why it failed: an unsupported `point` emitter, then "the scene has no light")."""
 
     def __init__(self):
         super().__init__(logging.INFO)
@@ -243,7 +280,7 @@ def _run(argv, warnings):
     from .render import DEFAULT_WAVE, _check_crop, check_memory, render, write_outputs
     from .scene import load_scene
 
-    args = _parser().parse_args(argv)
+    args = _parser().parse_args(_denoise_quality(argv))
     warnings.verbose = args.verbose
     if args.version:
         from . import __version__
@@ -267,7 +304,7 @@ def _run(argv, warnings):
         if not eq or not name.strip():
             raise TracerError(f"--define {d!r}: expected NAME=VALUE")
         define[name.strip()] = value
-    out = args.output or os.path.splitext(os.path.basename(args.scene))[0] + ".exr"
+    out = args.output or default_output(args.scene)
     from .bvh import ACCELS
     from .errors import unknown_name
     from .guiding import make_guide
@@ -326,19 +363,32 @@ def _run(argv, warnings):
         result.stats["metrics"] = metrics.all_metrics(result.image, ref)
     exr, png, js = write_outputs(result, out, exposure=args.exposure, variance=args.variance, reference=ref)
     s = result.stats
-    if s["interrupted"]:
-        note = f" (interrupted; every pixel has at least {s['spp']})" if s["spp_mean"] != s["spp"] else \
-            " (interrupted)"
-    else:
-        note = ""
-    print(f"{exr}: {s['width']}x{s['height']}, {s['spp_mean']:.0f} spp{note} in {s['time_total']:.2f} s, "
+    print(f"{exr}: {s['width']}x{s['height']}, {_spp_text(s)} in {s['time_total']:.2f} s, "
           f"{s['msamples_per_s']:.2f} Msamples/s, {s['mrays_per_s']:.2f} Mrays/s; preview {png} "
           f"(exposure {s['preview_exposure']:+.2f} EV{', the reference' + chr(39) + 's' if ref is not None else ''}), stats {js}")
+    training = s["guide_stats"].get("training") or {}
+    if training.get("stopped"):
+        print(f"  {guide_name} trained {training['trained']} of {training['iterations']} iterations after its pilot: "
+              f"{training['why']}")
     if result.denoised is not None:
-        print(f"  denoised (Open Image Denoise, {s['time_denoise']:.2f} s): {os.path.splitext(exr)[0]}.denoised.exr")
+        base = os.path.splitext(exr)[0]
+        print(f"  denoised (Open Image Denoise, {s['time_denoise']:.2f} s): {base}.denoised.exr, preview "
+              f"{base}.denoised.png")
     if ref is not None:
         print("  ".join(f"{k} {v:.6g}" for k, v in s["metrics"].items()))
     return EXIT_INTERRUPTED if s["interrupted"] else 0
+
+
+def _spp_text(s):
+    """The summary's samples per pixel, as the stats JSON has them: spp_mean, and where a pass was
+    cut (at the budget's end, or by Ctrl-C) the whole sweeps every pixel got (`spp`)."""
+    parts = ["interrupted"] if s["interrupted"] else []
+    if s["spp_mean"] != s["spp"]:
+        parts.append(f"every pixel has at least {s['spp']}")
+        text = f"{s['spp_mean']:.2f} spp"
+    else:
+        text = f"{s['spp']} spp"
+    return text + (f" ({'; '.join(parts)})" if parts else "")
 
 
 def main(argv=None):
@@ -352,6 +402,7 @@ def main(argv=None):
     try:
         return _run(sys.argv[1:] if argv is None else argv, warnings)
     except TracerError as e:
+        warnings.show_held()
         print(f"tracer: {e}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:  # stdout closed early (`tracer --list-guides | head`)

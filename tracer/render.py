@@ -379,7 +379,8 @@ def _stats(scene, stats, passes, spp, t_setup, t_start, t_render, settings, t_co
         # the maps' rebuild between passes, and network inference (0 for guides without a network)
         "guide_time_update": float(getattr(guide, "time_update", 0.0)) if guide is not None else 0.0,
         "guide_time_inference": float(getattr(guide, "time_inference", 0.0)) if guide is not None else 0.0,
-        "guide_stats": guide.stats() if guide is not None else {},
+        "guide_stats": dict(guide.stats(), **({"training": dict(guide.training)} if guide.training else {}))
+        if guide is not None else {},
     }
 
 

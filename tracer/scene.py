@@ -10,6 +10,7 @@ skipped), the camera (look-at, a camera-to-world matrix, or framed by tracer.fra
 scene gives none) and the check that the scene has a light.
 """
 import logging
+import math
 import os
 from dataclasses import dataclass, field, replace
 
@@ -173,7 +174,8 @@ class SceneSpec:
 
 
 def load_scene(path, before_framing=None, define=None, allow_missing=False, **overrides):
-    """Load a scene; keyword overrides replace sidecar values (width, height, spp, ...); `define`
+    """Load a scene; keyword overrides replace sidecar values (width, height, spp, ...: width or
+    height alone keeps the scene's aspect ratio, the other side rounded, at least 1); `define`
     ({name: value}) overrides a Mitsuba scene XML's <default> values, as `mitsuba -D`;
     allow_missing: a Mitsuba scene's missing mesh or texture is a warning, not an error.
 
@@ -188,10 +190,11 @@ def load_scene(path, before_framing=None, define=None, allow_missing=False, **ov
     bad = sorted(set(overrides) - set(OVERRIDES))
     if bad:
         raise SettingsError(f"unknown scene override {bad[0]!r}; valid: {', '.join(sorted(OVERRIDES))}")
+    size = _size_overrides(overrides)
     warnings = []
     ext = os.path.splitext(path)[1].lower()
     if ext == ".xml":
-        return _load_mitsuba(path, before_framing, overrides, define, allow_missing)
+        return _load_mitsuba(path, before_framing, overrides, define, allow_missing, size)
     if define:
         raise SettingsError(f"{path}: define ({', '.join(define)}) is for Mitsuba scene XML files")
     if ext == ".json":
@@ -209,7 +212,8 @@ def load_scene(path, before_framing=None, define=None, allow_missing=False, **ov
     else:
         if not os.path.exists(path):
             raise SceneError(f"{path}: scene file not found")
-        raise SceneError(f"{path}: not a scene file; give an .obj (with optional .json sidecar) or a .json")
+        raise SceneError(f"{path}: not a scene file; give an .obj (with optional .json sidecar), a .json "
+                         "or a Mitsuba scene .xml")
 
     geo = read_obj_scene(obj_path, warnings)
     libs = ", ".join(geo.mtllibs)
@@ -226,14 +230,41 @@ def load_scene(path, before_framing=None, define=None, allow_missing=False, **ov
     override_materials(geo.materials, sidecar, sidecar_path)
     width, height, settings, camera, environment = sidecar_settings(sidecar, sidecar_path, overrides)
     hint = ""
-    if geo.undefined:  # its emitter may be among them (the warning is not shown when loading fails)
+    if geo.undefined:  # its emitter may be among them (the error then says so itself)
         hint = f" ({', '.join(repr(n) for n in geo.undefined[:5])} not defined {where})"
     spec = SceneSpec(path=obj_path if ext == ".obj" else path, geometry_file=obj_path, tri=geo.tri,
                      tri_material=geo.tri_material, materials=geo.materials, width=width, height=height,
                      render=settings, camera=camera, environment=environment, warnings=warnings,
                      no_light=f"no material with Ke > 0 and no environment in the sidecar{hint}",
                      uv=geo.uv, normals=geo.normals, textures=geo.textures or [])
+    _resize(spec, size)
     return build_scene(spec, before_framing)
+
+
+def _size_overrides(overrides):
+    """Take width and height out of load_scene's `overrides` ({name: value}, changed in place):
+    {"width": w, "height": h} of those given, each an integer >= 1 (SettingsError otherwise)."""
+    size = {}
+    for key in ("width", "height"):
+        if key in overrides:
+            v = overrides.pop(key)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise SettingsError(f"{key} must be an integer >= 1, got {v!r}")
+            size[key] = int(v)
+    return size
+
+
+def _resize(spec, size):
+    """Give `spec` the film size of `size` (from _size_overrides): one side alone keeps the
+    spec's aspect ratio, the other side rounded to the nearest pixel, at least 1."""
+    w, h = size.get("width"), size.get("height")
+    if w is None and h is None:
+        return
+    if h is None:
+        h = max(1, math.floor(spec.height * w / spec.width + 0.5))
+    elif w is None:
+        w = max(1, math.floor(spec.width * h / spec.height + 0.5))
+    spec.width, spec.height = w, h
 
 
 def _padded(param):
@@ -265,21 +296,20 @@ def prepare_coats(materials, textures):
     materials.param, materials.table = prepare(materials.type, materials.param, kd, ks)
 
 
-def _load_mitsuba(path, before_framing, overrides, define=None, allow_missing=False):
-    """load_scene for a Mitsuba scene XML (tracer.readers.mitsuba), with the keyword overrides and
-    the <default> values `define` replaces."""
+def _load_mitsuba(path, before_framing, overrides, define=None, allow_missing=False, size=None):
+    """load_scene for a Mitsuba scene XML (tracer.readers.mitsuba), with the keyword overrides, the
+    film size (_size_overrides) and the <default> values `define` replaces."""
     from .readers.mitsuba import read_mitsuba_scene
 
     if not os.path.exists(path):
         raise SceneError(f"{path}: scene file not found")
     spec = read_mitsuba_scene(path, {str(k): str(v) for k, v in (define or {}).items()}, allow_missing)
     for key, value in overrides.items():
-        if key in ("width", "height"):
-            setattr(spec, key, int(value))
-        elif key == "fov":
+        if key == "fov":
             spec.camera.fov = float(value)
         else:
             setattr(spec.render, key, int(value))
+    _resize(spec, size or {})
     return build_scene(spec, before_framing)
 
 

@@ -141,7 +141,7 @@ class Session:
         """Show `name` (pilot, train t/T, learn, final, ...) on the progress bar of a render with a
         guide (plain BSDF sampling keeps `render`)."""
         if self.bar is not None and self.guide is not None:
-            self.bar.set_description(name)
+            self.bar.set_description_str(name)  # (set_description would add a colon to the bar's own)
 
     def run_pass(self, film, spp, kind, learn=False, source=None, split=None, deadline=False, wave=None,
                  sweeps=MIN_SWEEPS):
@@ -164,28 +164,42 @@ class Session:
         direct = g.records_direct(ctx) if g is not None else True
         self._pass_paths, self._pass_seconds = 0, 0.0
         limit = (lambda n: self.wave_limit(n, film, sweeps)) if deadline and self.time is not None else None
-        if wave is None:
-            trace_source(ctx, source, film, spp, self.sample0, buf, self.stats, observe, direct, split,
-                         self._before_wave, self._after_wave, limit)
-            total = source.count(ctx, spp)
-        else:
-            total = spp * ctx.n_pixels
-            sample0 = self.sample0
-            run_waves(total, buf.size, lambda g0, n: wave(sample0, g0, n), self._before_wave, self._after_wave, limit)
-        entry = {"spp": spp, "time": _time.perf_counter() - tp, "kind": kind, "film": index}
-        if self._pass_paths < total:  # cut at the end of the budget: count the whole sweeps
-            self.out_of_time = True
-            entry.update(partial=True, paths=self._pass_paths)
-            self.sample0 += self._pass_paths * spp // total
-        else:
-            self.sample0 += spp
+        total = source.count(ctx, spp) if wave is None else spp * ctx.n_pixels
+        try:
+            if wave is None:
+                trace_source(ctx, source, film, spp, self.sample0, buf, self.stats, observe, direct, split,
+                             self._before_wave, self._after_wave, limit)
+            else:
+                sample0 = self.sample0
+                run_waves(total, buf.size, lambda g0, n: wave(sample0, g0, n), self._before_wave, self._after_wave,
+                          limit)
+        except KeyboardInterrupt:  # between waves: the waves traced are in the film, and in the stats' passes
+            self._end_pass(spp, kind, index, tp, total, interrupted=True)
+            raise
+        entry = self._end_pass(spp, kind, index, tp, total)
         if learn:
             tl = _time.perf_counter()
             g.update()
             ctx.guide_state = g.state()
             entry["time_update"] = _time.perf_counter() - tl
-        self.passes.append(entry)
         self.after_pass(film)
+
+    def _end_pass(self, spp, kind, index, tp, total, interrupted=False):
+        """Append the pass's entry to self.passes and advance sample0: by spp, or, for a pass cut at
+        the budget's end (out_of_time) or by Ctrl-C, by the whole sweeps over the pixels it made
+        (the entry then has partial and paths, and `interrupted` for Ctrl-C). Returns the entry."""
+        entry = {"spp": spp, "time": _time.perf_counter() - tp, "kind": kind, "film": index}
+        if self._pass_paths < total:
+            entry.update(partial=True, paths=self._pass_paths)
+            if interrupted:
+                entry["interrupted"] = True
+            else:
+                self.out_of_time = True
+            self.sample0 += self._pass_paths * spp // total
+        else:
+            self.sample0 += spp
+        self.passes.append(entry)
+        return entry
 
     def after_pass(self, film):
         """Call the callback with the pass just appended to self.passes and `film`; Stop if it

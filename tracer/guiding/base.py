@@ -51,6 +51,7 @@ class Guide:
     iterations = 0  # training iterations of Algorithm 1 (schedules that use it)
     spp_init = 1  # Algorithm 1's N_c: iteration t renders 2^t N_c spp
     train_budget = 1.0  # with a time budget: share of it that learning may take
+    training = None  # Algorithm 1's schedules: how training went (grid.schedule.training_record)
     splitting = None  # splitting.WeightWindow, or None (never splits)
     camera_paths = True  # final passes start at the camera (False: from the guide's own source, e.g. pss's warp)
     pixel_maps = False  # the state holds per-pixel first-bounce maps (GuideState.pixel_slot)
