@@ -56,6 +56,38 @@ def test_render_denoised_is_closer_to_the_analytic_image(tmp_path):
     assert tracer.render(scene, spp=1).denoised is None
 
 
+def _noisy(rng, h, w):
+    """A noisy image, an albedo and unit normals, (h, w, 3) float32 each."""
+    img = rng.gamma(1.0, 1.0, (h, w, 3)).astype(np.float32)
+    albedo = rng.uniform(0.0, 1.0, (h, w, 3)).astype(np.float32)
+    normal = rng.normal(size=(h, w, 3)).astype(np.float32)
+    return img, albedo, normal / np.linalg.norm(normal, axis=2, keepdims=True)
+
+
+@needs_oidn
+def test_a_second_call_of_the_same_size_reuses_the_filters():
+    """Denoiser keeps its three filters (two prefilters, the colour filter) per image size: a
+    second call of that size builds none, and its result equals a fresh Denoiser's on the same
+    input, bit for bit. Detects filters rebuilt on every call (the cost this saves), and reused
+    filters that read stale inputs (the first call's image or buffers) or write elsewhere."""
+    rng = np.random.default_rng(5)
+    first, second = _noisy(rng, 12, 20), _noisy(rng, 12, 20)
+    d = dn.Denoiser(threads=1)
+    d(*first)
+    assert d.filters_built == 3
+    out = d(*second)
+    assert d.filters_built == 3
+    fresh = dn.Denoiser(threads=1)
+    assert np.array_equal(out, fresh(*second))
+    assert not np.array_equal(out, fresh(*first))
+    assert np.array_equal(d(second[0]), fresh(second[0]))  # no buffers: a filter of its own
+    assert d.filters_built == 4
+    d(*_noisy(rng, 20, 12))  # another size: its own three
+    assert d.filters_built == 7
+    d.close()
+    fresh.close()
+
+
 def test_bad_settings_are_one_clear_error(monkeypatch):
     scene = None  # never loaded: the settings fail first
     with pytest.raises(SettingsError, match="denoise quality must be one of high, balanced, fast"):
@@ -76,12 +108,35 @@ def test_cli_without_pyoidn_fails_before_rendering(tmp_path, capsys, monkeypatch
     assert not out.parent.exists()
 
 
+def test_cli_denoise_quality_is_optional_before_the_scene(tmp_path, capsys, monkeypatch):
+    """`--denoise SCENE` takes SCENE as the scene (quality high), `--denoise fast SCENE` and
+    `--denoise=fast` the quality; a bare --denoise last is high. Detects the optional quality
+    swallowing the scene ("the following arguments are required: scene")."""
+    from tracer.cli import _denoise_quality, _parser
+
+    def parse(*argv):
+        a = _parser().parse_args(_denoise_quality(argv))
+        return a.scene, a.denoise
+
+    assert parse("--denoise", "s.xml") == ("s.xml", "high")
+    assert parse("--denoise", "fast", "s.xml") == ("s.xml", "fast")
+    assert parse("--denoise=balanced", "s.xml") == ("s.xml", "balanced")
+    assert parse("s.xml", "--denoise") == ("s.xml", "high")
+    assert parse("s.xml", "--spp", "2") == ("s.xml", None)
+    obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=8, height=8)
+    monkeypatch.setattr(dn, "available", lambda: False)  # the run gets as far as the denoiser's check
+    assert main(["--denoise", str(obj), "--spp", "1", "-o", str(tmp_path / "o.exr"), "-q"]) == 2
+    assert capsys.readouterr().err.startswith("tracer: denoising needs")
+
+
 @needs_oidn
 def test_cli_writes_the_denoised_image_beside_the_raw_one(tmp_path, capsys):
     obj = scenes.closed_box(tmp_path / "box", 0.5, 1.0, width=8, height=8)
     out = tmp_path / "box.exr"
     assert main([obj, "--spp", "2", "-o", str(out), "--denoise", "fast", "-q"]) == 0
-    assert "denoised (Open Image Denoise" in capsys.readouterr().out
+    summary = capsys.readouterr().out
+    assert "denoised (Open Image Denoise" in summary
+    assert f"{tmp_path / 'box.denoised.exr'}, preview {tmp_path / 'box.denoised.png'}" in summary
     raw, clean = tracer.read_image(str(out)), tracer.read_image(str(tmp_path / "box.denoised.exr"))
     assert clean.shape == raw.shape and np.isfinite(clean).all() and not np.array_equal(clean, raw)
     assert os.path.isfile(tmp_path / "box.denoised.png")

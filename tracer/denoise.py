@@ -42,14 +42,21 @@ def require(quality="high"):
 
 class Denoiser:
     """An OIDN CPU device with `threads` threads; call it as denoise() (reuse it: creating the
-    device and loading the network weights costs more than a small image's filter)."""
+    device and loading the network weights costs more than a small image's filter).
 
+    The filters of a call (the albedo's and the normal's prefilter, the colour filter) are built
+    and committed once per image size and set of buffers, bound to arrays the Denoiser keeps,
+    and only executed by later calls of that size (building them costs several times the filter
+    itself); the last MAX_SIZES sizes are kept. `filters_built` counts the filters built. Calls
+    run one at a time (a lock)."""
+
+    MAX_SIZES = 4
     _shared = {}
 
     @classmethod
     def shared(cls, threads=None, quality="high"):
         """One Denoiser per (threads, quality) for the process: what render() uses, so that a run of
-        renders makes the device and times the filter once."""
+        renders makes the device, builds the filters and times them once per image size."""
         key = (threads, quality)
         if key not in cls._shared:
             cls._shared[key] = cls(threads, quality)
@@ -57,9 +64,14 @@ class Denoiser:
 
     def __init__(self, threads=None, quality="high"):
         require(quality)
+        import threading
+
         import pyoidn
 
         self._seconds = {}
+        self._prepared = {}  # (height, width, albedo given, normal given) -> _Prepared, oldest first
+        self._lock = threading.Lock()
+        self.filters_built = 0
 
         self._oidn = pyoidn
         self.quality = {"high": pyoidn.OIDN_QUALITY_HIGH, "balanced": pyoidn.OIDN_QUALITY_BALANCED,
@@ -75,8 +87,8 @@ class Denoiser:
         if err:
             raise RuntimeError(f"Open Image Denoise failed {what}: {err}")
 
-    def run_filter(self, images, hdr, what, clean_aux=True):
-        """Run one RT filter over {slot: float32 (H, W, 3) array}, the output array among them;
+    def _new_filter(self, images, hdr, what, clean_aux=True):
+        """A committed RT filter bound to {slot: float32 (H, W, 3) array} (the output among them);
         hdr: the colour filter (with cleanAux: the buffers were prefiltered), else a prefilter."""
         o = self._oidn
         f = o.Filter(self.device, "RT")
@@ -88,36 +100,98 @@ class Denoiser:
                 f.set_bool("cleanAux", clean_aux)
             f.set_quality(self.quality)
             f.commit()
+            self._check(what)
+        except BaseException:
+            f.release()
+            raise
+        self.filters_built += 1
+        return f
+
+    def run_filter(self, images, hdr, what, clean_aux=True):
+        """Build, run and release one RT filter over {slot: float32 (H, W, 3) array}, the output
+        array among them (for experiments with other inputs; __call__ keeps its filters)."""
+        f = self._new_filter(images, hdr, what, clean_aux)
+        try:
             f.execute()
             self._check(what)
         finally:
             f.release()
+
+    def _filters_for(self, shape, slots):
+        """The _Prepared of images of `shape` with the auxiliary buffers `slots`, built on first use."""
+        key = (shape[0], shape[1]) + tuple(s in slots for s in ("albedo", "normal"))
+        prepared = self._prepared.pop(key, None)
+        if prepared is None:
+            prepared = _Prepared(self, shape, slots)
+            while len(self._prepared) >= self.MAX_SIZES:
+                self._prepared.pop(next(iter(self._prepared))).release()
+        self._prepared[key] = prepared  # (re)inserted last: the most recently used
+        return prepared
 
     def __call__(self, image, albedo=None, normal=None):
         """The denoised (H, W, 3) float32 image. albedo (clipped to [0, 1]) and normal are the
         render's buffers (result.aovs), prefiltered first; normal needs albedo (OIDN's rule)."""
         color = _rgb(image, "image")
         shape = color.shape
-        images = {"color": color}
         if normal is not None and albedo is None:
             raise SettingsError("denoise: a normal buffer needs an albedo buffer too (Open Image Denoise)")
-        for slot, aux in (("albedo", albedo), ("normal", normal)):
-            if aux is None:
+        aux = {}
+        for slot, a in (("albedo", albedo), ("normal", normal)):
+            if a is None:
                 continue
-            aux = _rgb(aux, slot)
-            if aux.shape != shape:
-                raise SettingsError(f"denoise: the {slot} buffer is {aux.shape}, the image {shape}")
-            aux = np.clip(aux, 0.0, 1.0) if slot == "albedo" else np.clip(aux, -1.0, 1.0)
-            clean = np.empty_like(aux)
-            self.run_filter({slot: np.ascontiguousarray(aux), "output": clean}, False, f"prefiltering the {slot}")
-            images[slot] = clean
-        out = np.empty_like(color)
-        images["output"] = out
-        self.run_filter(images, True, "denoising the image")
-        return out
+            a = _rgb(a, slot)
+            if a.shape != shape:
+                raise SettingsError(f"denoise: the {slot} buffer is {a.shape}, the image {shape}")
+            aux[slot] = np.clip(a, 0.0, 1.0) if slot == "albedo" else np.clip(a, -1.0, 1.0)
+        with self._lock:
+            prepared = self._filters_for(shape, tuple(aux))
+            return prepared.run(color, aux)
 
     def close(self):
+        for prepared in self._prepared.values():
+            prepared.release()
+        self._prepared = {}
         self.device.release()
+
+
+class _Prepared:
+    """The committed filters of one image size and set of auxiliary buffers, with the arrays they
+    are bound to: each auxiliary buffer's prefilter (into `<slot>_clean`), then the colour filter
+    reading the prefiltered buffers."""
+
+    def __init__(self, denoiser, shape, slots):
+        self.images = {name: np.zeros(shape, np.float32)
+                       for name in ("color", "output") + slots + tuple(s + "_clean" for s in slots)}
+        im = self.images
+        self.filters = []
+        try:
+            for slot in slots:
+                what = f"prefiltering the {slot}"
+                self.filters.append((denoiser._new_filter({slot: im[slot], "output": im[slot + "_clean"]}, False,
+                                                          what), what))
+            what = "denoising the image"
+            colour = {"color": im["color"], "output": im["output"], **{s: im[s + "_clean"] for s in slots}}
+            self.filters.append((denoiser._new_filter(colour, True, what), what))
+        except BaseException:
+            self.release()
+            raise
+        self._check = denoiser._check
+
+    def run(self, color, aux):
+        """Copy the inputs into the bound arrays, execute the filters in order; a copy of the output."""
+        im = self.images
+        np.copyto(im["color"], color)
+        for slot, a in aux.items():
+            np.copyto(im[slot], a)
+        for f, what in self.filters:
+            f.execute()
+            self._check(what)
+        return im["output"].copy()
+
+    def release(self):
+        for f, _ in self.filters:
+            f.release()
+        self.filters = []
 
 
 def _rgb(a, what):
