@@ -12,11 +12,15 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 
 def gradient_z(name, size, spp, ref_spp, **kw):
     """[(key, z)] for dx and dy of a size x size render of built-in scene `name` (tests.scenes.builtin:
-    `NAME-textured` too; spp, seed 11,
-    max_depth 5, render kwargs kw): per-pixel z-scores, where no emitter is seen directly from
-    either pixel, of the gradient against the difference of the two pixels of a path render
-    (ref_spp, seed 12), with the variances of both."""
-    scene = scenes.builtin(ROOT, name, size, size)
+    `NAME-textured` too): scene_gradient_z's."""
+    return scene_gradient_z(scenes.builtin(ROOT, name, size, size), spp, ref_spp, **kw)
+
+
+def scene_gradient_z(scene, spp, ref_spp, **kw):
+    """[(key, z)] for dx and dy of a gpt render of `scene` (spp, seed 11, max_depth 5, render
+    kwargs kw): per-pixel z-scores, where no emitter is seen directly from either pixel, of the
+    gradient against the difference of the two pixels of a path render (ref_spp, seed 12), with
+    the variances of both."""
     g = tracer.render(scene, spp=spp, integrator="gpt", recon="none", seed=11, max_depth=5, **kw)
     p = tracer.render(scene, spp=ref_spp, seed=12, max_depth=5)
     assert_clean(g)

@@ -16,7 +16,7 @@ from ..sampling import dot, to_local, triangle_point
 from ..shading import emitted_env, emitted_surface, light_sample_at, next_bounce, offset_point
 from ..shading import shadow_ray, write_aovs, write_shadow
 from .offsets import BLOCKED, CONNECTED, TRACED
-from .shift import is_delta, is_rough, path_density, reconnection
+from .shift import is_rough, path_density, reconnection
 
 # NeeTerms.mode of an offset at a bounce: no NEE term; the base's own weighted value alone (no
 # partner path); the partner shares the base's shadow ray (the offset sits at the base's vertex);
@@ -124,24 +124,27 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
         if dk > 0:
             rb = pl / prev_pdf[i]
             for o in range(4):
-                if not o_alive[i, o]:  # the base's techniques alone: the path tracer's weight (BSDF's
-                    wd = w if o_lights[i, o] else 1.0  # alone after a failed half-vector copy)
+                if not o_alive[i, o]:  # the base's techniques alone: the path tracer's weight
                     for c in range(3):
-                        G[i, o, c] -= cb[c] * wd
+                        G[i, o, c] -= cb[c] * w
                     continue
                 leo, plo = _emitted_by(lt, surf.normal, o_prim[i, o], (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2]),
                                        o_dist2[i, o], o_delta[i, o])
                 ro = plo / o_pdf[i, o]
                 R2 = o_R[i, o] * o_R[i, o]
+                wb = 1.0
+                wo_ = 1.0
                 if o_status[i, o] == BLOCKED:  # no BSDF sample reaches x through the occluder: no light
                     den = 1.0 + rb * rb + R2 * ro * ro
                     leo = (0.0, 0.0, 0.0)
                 elif o_lights[i, o]:
                     den = 1.0 + rb * rb + R2 * (1.0 + ro * ro)
-                else:
-                    den = 1.0 + R2
+                else:  # a half-vector copy: each side's NEE stays its own (NEE_BASE_ALONE), so each path
+                    den = 1.0 + R2  # keeps its path tracer's BSDF weight, shared by the pair's two sides
+                    wb = w
+                    wo_ = 1.0 / (1.0 + ro * ro)
                 for c in range(3):
-                    G[i, o, c] += (o_beta[i, o, c] * leo[c] - cb[c]) / den
+                    G[i, o, c] += (o_beta[i, o, c] * leo[c] * wo_ - cb[c] * wb) / den
         for o in range(4):  # an offset that escaped, or was blocked, ends here
             if o_alive[i, o] and (o_prim[i, o] < 0 or o_status[i, o] == BLOCKED):
                 o_alive[i, o] = False
@@ -161,6 +164,13 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
             if o_alive[i, o]:
                 if o_status[i, o] == TRACED:
                     o_rough[i, o] = is_rough(surf, surf.material[o_prim[i, o]], roughness)
+                    # A rough vertex and a glossy one have no shift between them: a half-vector copy
+                    # would pair a diffuse bounce with a near-delta lobe (an offset of density ~0) and
+                    # leave the gradient without NEE. The shift fails at both ends alike (the rule
+                    # reads the two vertices' classes only), so each side keeps the path tracer's
+                    # weights and the pair's gradient is the two pixels' own difference.
+                    if o_rough[i, o] != rough:
+                        o_alive[i, o] = False
                 else:
                     o_rough[i, o] = rough
 
@@ -198,11 +208,11 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
                         continue
                     st = o_status[i, o]
                     if st == TRACED and not (rough and o_rough[i, o] and rough_z):
-                        # The pair's BSDF sample would be copied, not reconnected: no NEE for it (NEE
-                        # reconnects, and both techniques must map a path to the same partner). An
-                        # offset at a delta vertex has no partner either way: the base's two techniques.
-                        if is_delta(surf, surf.material[o_prim[i, o]]):
-                            n_mode[i, o] = NEE_BASE_ALONE
+                        # The pair's BSDF sample would be copied, not reconnected: NEE has no partner
+                        # (it reconnects, and both techniques must map a path to the same partner), so
+                        # each side keeps its own NEE with the path tracer's weight, and the copied
+                        # BSDF samples share the rest (the emission's weights above)
+                        n_mode[i, o] = NEE_BASE_ALONE
                         continue
                     y = x
                     ngy = ng
