@@ -96,3 +96,20 @@ def test_bad_input_is_one_clear_error():
         poisson.solve_l1(np.zeros((4, 4)), np.zeros((4, 4)), np.zeros((4, 4)), alpha=0.0)
     with pytest.raises(SettingsError, match="reconstruction"):
         poisson.reconstruct("l3", np.zeros((4, 4)), np.zeros((4, 4)), np.zeros((4, 4)))
+
+
+def test_l1_stops_reweighting_at_its_deadline():
+    """With a deadline already past, the L1 solve runs its first reweighting only (the result of
+    reweights=1, bit for bit), and with one far off it runs them all: a budgeted render's solve
+    ends by the budget. Detects a deadline that is ignored, or one that skips the first
+    reweighting (the L2 start returned as the L1 image)."""
+    import time
+
+    rng = np.random.default_rng(5)
+    img = rng.random((24, 20))
+    gx, gy = poisson.grad_x(img) + rng.normal(scale=0.1, size=img.shape), poisson.grad_y(img)
+    past = poisson.solve_l1(img, gx, gy, deadline=time.perf_counter() - 1.0)
+    np.testing.assert_array_equal(past, poisson.solve_l1(img, gx, gy, reweights=1))
+    assert not np.array_equal(past, poisson.solve_l2(img, gx, gy))
+    far = poisson.solve_l1(img, gx, gy, deadline=time.perf_counter() + 1e6)
+    np.testing.assert_array_equal(far, poisson.solve_l1(img, gx, gy))

@@ -121,13 +121,14 @@ def solve_time_estimate(recon, width, height, alpha, opts=None):
     return max(times[0] + per_pixel * (width * height - 64 * 64), 0.0)
 
 
-def reconstruct_buffers(buffers, recon, alpha, opts=None):
+def reconstruct_buffers(buffers, recon, alpha, opts=None, deadline=None):
     """(image (H,W,3) float64: the reconstruction of buffers["indirect"] from it and its gradients
     buffers["dx"], ["dy"] (and, for gradnet, the features albedo, normal, depth, and the variance
     buffers base_variance, dx_variance, dy_variance where the network reads them) plus
     buffers["direct"]; seconds the solve or the network's inference with its energy correction
     took). The buffers are those of a gpt render (solve's), so that one render can be
-    reconstructed every way."""
+    reconstructed every way. deadline (time.perf_counter seconds): where the L1 solve stops
+    reweighting (poisson.solve_l1)."""
     t0 = _time.perf_counter()
     if recon == "gradnet":
         from . import gradnet
@@ -145,18 +146,18 @@ def reconstruct_buffers(buffers, recon, alpha, opts=None):
             rec = gradnet.energy_correction(rec, b["indirect"])
         image = rec.astype(np.float64)
     else:
-        image = poisson.reconstruct(recon, buffers["indirect"], buffers["dx"], buffers["dy"], alpha)
+        image = poisson.reconstruct(recon, buffers["indirect"], buffers["dx"], buffers["dy"], alpha, deadline)
     t_solve = _time.perf_counter() - t0
     return image + buffers["direct"], t_solve
 
 
-def solve(films, recon, alpha, opts=None):
+def solve(films, recon, alpha, opts=None, deadline=None):
     """Reconstruct from GradientFilms: (image (H,W,3) float64, the reconstruction of the indirect
     light plus the direct buffer; buffers {name: float32 (H,W,3), depth (H,W,1)}: base,
     base_variance, dx, dx_variance, dy, dy_variance, direct, indirect, and the features of a
     learned reconstruction: albedo (at the first vertex that is not a delta BSDF), normal, depth
     (divided by the largest, so in [0, 1]); seconds the solve (or the network's inference, with
-    its energy correction) took)."""
+    its energy correction) took). deadline: reconstruct_buffers'."""
     indirect, dx, dy = films.indirect.mean(), films.dx.mean(), films.dy.mean()
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     aovs = films.base.aovs()
@@ -168,7 +169,7 @@ def solve(films, recon, alpha, opts=None):
     variances = {"base_variance": f32(films.base.variance()), "dx_variance": f32(films.dx.variance()),
                  "dy_variance": f32(films.dy.variance())}
     image, t_solve = reconstruct_buffers(dict(features, **variances, indirect=indirect, dx=dx, dy=dy,
-                                              direct=films.direct.mean()), recon, alpha, opts)
+                                              direct=films.direct.mean()), recon, alpha, opts, deadline)
     buffers = {"base": f32(films.base.mean()), "dx": f32(dx), "dy": f32(dy), "direct": f32(films.direct.mean()),
                "indirect": f32(indirect), **variances, **features}
     return image, buffers, t_solve

@@ -14,6 +14,8 @@ column (dx) and last row (dy) left out (they point outside the image). Arrays ar
   equations by conjugate gradients preconditioned with the exact L2 solve, warm-started from the
   last iterate.
 """
+import time as _time
+
 import numpy as np
 import scipy.fft
 from scipy.sparse.linalg import LinearOperator, cg
@@ -88,13 +90,15 @@ def solve_l2(base, gx, gy, alpha=0.2):
     return _inverse_l2(rhs, _eigenvalues(base.shape, a2))
 
 
-def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=10, cg_rtol=1e-4, dtype=np.float32):
+def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=10, cg_rtol=1e-4, dtype=np.float32,
+             deadline=None):
     """The L1 screened Poisson reconstruction by IRLS (see the module docstring): `reweights`
     reweightings, each at most `cg_iterations` preconditioned CG steps to relative residual
     `cg_rtol`, started from the L2 solution. The iterations run in `dtype`, float32 by default
     (2.8x faster than float64 at 1280x720, the same error to 1e-6 of the image's scale); returns
     float64 of base's shape. The number of CG steps trades time for how far gradient outliers are suppressed
-    (docs/gradient.md)."""
+    (docs/gradient.md). deadline (time.perf_counter seconds): no reweighting starts that would
+    end after it, at the pace of the one before (the first always runs)."""
     base, gx, gy = _check(base, gx, gy, alpha)
     dtype = np.dtype(dtype)
     base, gx, gy = (a.astype(dtype) for a in (base, gx, gy))
@@ -105,7 +109,11 @@ def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=10,
     shape, n = base.shape, base.size
     precond = LinearOperator((n, n), matvec=lambda v: _inverse_l2(v.reshape(shape), lam).ravel(), dtype=dtype)
     n_terms = base.size + gx[:, :-1].size + gy[:-1].size
+    t_step = 0.0
     for k in range(int(reweights)):
+        t0 = _time.perf_counter()
+        if deadline is not None and k > 0 and t0 + t_step > deadline:
+            break
         eps = dtype.type(eps0 * 0.5 ** k)
         wb = 1.0 / (np.abs(al * (img - base)) + eps)
         wx = 1.0 / (np.abs(grad_x(img) - gx) + eps)
@@ -123,6 +131,7 @@ def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=10,
         rhs = (a2 * wb * base + grad_x_t(wx * gx) + grad_y_t(wy * gy)).ravel()
         sol, _ = cg(op, rhs, x0=img.ravel(), rtol=cg_rtol, maxiter=int(cg_iterations), M=precond)
         img = sol.reshape(shape)
+        t_step = _time.perf_counter() - t0
     return img.astype(np.float64)
 
 
@@ -134,12 +143,12 @@ def l1_objective(img, base, gx, gy, alpha=0.2):
                  + np.abs((grad_y(img) - gy)[:-1]).sum())
 
 
-def reconstruct(method, base, gx, gy, alpha=0.2):
-    """`method` l1, l2 or none (the base image itself)."""
+def reconstruct(method, base, gx, gy, alpha=0.2, deadline=None):
+    """`method` l1, l2 or none (the base image itself); deadline: solve_l1's."""
     if method == "l2":
         return solve_l2(base, gx, gy, alpha)
     if method == "l1":
-        return solve_l1(base, gx, gy, alpha)
+        return solve_l1(base, gx, gy, alpha, deadline=deadline)
     if method == "none":
         return np.asarray(base, dtype=np.float64)
     from ..errors import unknown_name

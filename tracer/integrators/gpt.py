@@ -48,6 +48,7 @@ class GptIntegrator(Integrator):
 
     def start(self):
         self.films = None
+        self._solve_reserve = 0.0
 
     def check_guide(self, guide, guide_name):
         if guide is None:
@@ -78,7 +79,9 @@ class GptIntegrator(Integrator):
         gradient.warm_up(ctx, self.shift, self.roughness)
 
     def reserve(self, width, height):
-        return gradient.solve_time_estimate(self.recon, width, height, self.recon_alpha, self.recon_settings)
+        self._solve_reserve = gradient.solve_time_estimate(self.recon, width, height, self.recon_alpha,
+                                                           self.recon_settings)
+        return self._solve_reserve
 
     def stats_settings(self):
         out = {"integrator": self.name, "nee": int(self.nee), "shift": self.shift, "recon": self.recon,
@@ -119,7 +122,10 @@ class GptIntegrator(Integrator):
             films = self.films
         # samples: the base paths (each traced five paths), after the passes before
         stats.samples = int(self._samples0 + films.base.count.sum())
-        image, buffers, t_solve = gradient.solve(films, self.recon, self.recon_alpha, self.recon_settings)
+        # with a budget, the L1 solve ends by its share of it (what is kept back after it: the denoiser)
+        deadline = None if session.time is None else \
+            session.t_start + session.time - (session.reserve - self._solve_reserve)
+        image, buffers, t_solve = gradient.solve(films, self.recon, self.recon_alpha, self.recon_settings, deadline)
         st = snapshot()
         st["interrupted"] = interrupted
         for p_entry in st["passes"]:
