@@ -132,9 +132,22 @@ def textured(scene):
 
 
 def builtin(root, name, width, height):
-    """A built-in scene by name at width x height; `NAME-textured` is NAME through textured()."""
+    """A built-in scene by name at width x height; `NAME-textured` is NAME through textured(),
+    `NAME-black` NAME through blackened()."""
     import tracer
 
-    base = name[: -len("-textured")] if name.endswith("-textured") else name
+    base, _, variant = name.partition("-")
     scene = tracer.load_scene(os.path.join(root, "scenes", base, f"{base}.obj"), width=width, height=height)
-    return textured(scene) if base != name else scene
+    return {"": lambda s: s, "textured": textured, "black": blackened}[variant](scene)
+
+
+def blackened(scene, names=("red",)):
+    """`scene` (changed in place and returned) with the diffuse materials `names` black (Kd 0): a
+    path that reaches them has throughput 0 from there on."""
+    from tracer import bsdfs
+
+    mats = scene.materials
+    for name in names:
+        m = mats.names.index(name)
+        mats.param[m, bsdfs.P_KD:bsdfs.P_KD + 3] = 0.0
+    return scene

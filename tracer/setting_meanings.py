@@ -99,6 +99,8 @@ INTEGRATORS = {
         "nee": "1: next-event estimation with MIS; 0: none (goes with shift=replay)",
         "shift": "how offset paths are made: hybrid (reconnect rough vertices) or replay (the same random numbers)",
         "roughness": "hybrid: vertices rougher than this (GGX alpha) reconnect",
+        "direct_roughness": "hybrid: the light a first vertex smoother than this (GGX alpha) reflects joins the "
+                            "direct buffer, added after the solve and left out of the gradients (0: off)",
         "recon": "the image from base and gradients: l2 (keeps the mean), l1, gradnet, or none (the base)",
         "recon_alpha": "l1, l2: the weight of the base image in the screened Poisson solve",
         "weights": "gradnet: the shipped weights (gradnet, gradnet_v2)",

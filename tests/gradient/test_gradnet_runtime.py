@@ -115,7 +115,7 @@ def test_no_nonfinite_pixel_on_any_built_in_scene(name):
 
 def test_settings_errors():
     scene = _scene("cornell", 8, 8)
-    with pytest.raises(SettingsError, match="integrator 'gpt' has no setting 'sigma'; valid: correction, nee, recon, recon_alpha, roughness, "
+    with pytest.raises(SettingsError, match="integrator 'gpt' has no setting 'sigma'; valid: correction, direct_roughness, nee, recon, recon_alpha, roughness, "
                                                 "shift, weights"):
         tracer.render(scene, spp=1, integrator="gpt", recon="gradnet", recon_settings={"sigma": 3})
     with pytest.raises(SettingsError, match="correction must be 0 or 1"):

@@ -153,7 +153,7 @@ def test_a_delta_lobe_shifts_only_to_a_delta_lobe():
 
 
 @pytest.mark.parametrize("name,roughness", [("ajar", 0.001), ("caustic", 0.001), ("cornell", math.inf),
-                                            ("ajar-textured", 0.001)])
+                                            ("ajar-textured", 0.001), ("cornell-black", 0.001)])
 def test_hybrid_gradients_are_unbiased(name, roughness):
     """dx, dy of the hybrid shift at 2048 spp against a 16384-spp path render (16x16): sum of z^2
     below the chi-square 1% quantile, mean z within its bound (Sidak over 4 tests).
@@ -165,7 +165,11 @@ def test_hybrid_gradients_are_unbiased(name, roughness):
       take no NEE and weigh emission over the BSDF techniques alone (NEE reconnecting while the
       BSDF sample is copied would pair a path with two different partners).
     - `ajar-textured` (tests/scenes.textured): offsets evaluate the textured BSDF and the shading
-      frame at their own points (material.surface_at_point), with the light-leak mask."""
+      frame at their own points (material.surface_at_point), with the light-leak mask.
+    - `cornell-black` (its red wall black, tests/scenes.blackened): a base whose throughput is 0
+      must still carry its offsets, which the pair's other side weighs as found from here too;
+      dropping them darkened the pairs across the wall's edges (as it did around every black-BSDF
+      light)."""
     for key, z in gradient_z(name, 16, 2048, 16384, shift="hybrid", shift_roughness=roughness):
         m = z.size
         assert m > 150
@@ -179,7 +183,8 @@ VEACH_MIS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path
 
 
 @pytest.mark.skipif(not os.path.isfile(VEACH_MIS), reason="../shared/scenes/veach-mis is not there")
-def test_hybrid_gradients_are_unbiased_on_glossy_plates_under_small_lights():
+@pytest.mark.parametrize("direct_roughness", [0.0, 0.01])
+def test_hybrid_gradients_are_unbiased_on_glossy_plates_under_small_lights(direct_roughness):
     """`veach-mis` (../shared/scenes) at 64x36: dx, dy at 128 spp against a 2048-spp path render,
     the chi-square and mean-z bounds of test_hybrid_gradients_are_unbiased. Its plates are near-
     specular (GGX alpha 1e-8 and 1.3e-4, below the shift's threshold, and 0.0017 and 0.008 above)
@@ -189,11 +194,14 @@ def test_hybrid_gradients_are_unbiased_on_glossy_plates_under_small_lights():
       near-delta lobe), whose pair took no NEE: the wall's light then came from BSDF samples alone,
       which at the plates' edges never hit the lights (sum z^2 = 17 m and 51 m, mean z 10 sigma);
     - a copy between two glossy vertices that drops NEE from the gradient instead of keeping each
-      side's own (the lobes' tails, lit by NEE alone: sum z^2 = 12 m and 4.2 m, mean z -13.6 sigma)."""
+      side's own (the lobes' tails, lit by NEE alone: sum z^2 = 12 m and 4.2 m, mean z -13.6 sigma).
+    With direct_roughness 0 every plate pixel is tested; with the default 0.01 the light the plates
+    reflect is direct light, its pixels are left out (as those that see a light), and the test
+    checks the gradients of the rest, from which that light must be left out alike."""
     scene = tracer.load_scene(VEACH_MIS, width=64, height=36)
-    for key, z in scene_gradient_z(scene, 128, 2048):
+    for key, z in scene_gradient_z(scene, 128, 2048, integrator_settings={"direct_roughness": direct_roughness}):
         m = z.size
-        assert m > 1500
+        assert m > (1500 if direct_roughness == 0.0 else 800)
         chi = float(np.sum(z * z))
         assert chi < sstats.chi2.isf(0.01 / 4, m), f"veach-mis {key}: sum z^2 = {chi:.0f} over {m} pixels"
         assert abs(z.mean()) * np.sqrt(m) < z_critical(4, 0.01), f"veach-mis {key}: mean z {z.mean():.3f}"

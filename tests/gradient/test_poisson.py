@@ -113,3 +113,27 @@ def test_l1_stops_reweighting_at_its_deadline():
     assert not np.array_equal(past, poisson.solve_l2(img, gx, gy))
     far = poisson.solve_l1(img, gx, gy, deadline=time.perf_counter() + 1e6)
     np.testing.assert_array_equal(far, poisson.solve_l1(img, gx, gy))
+
+
+def test_l1_fills_the_time_to_its_deadline():
+    """With fill, a deadline far off buys `reweights` more reweightings at the last eps (twice as
+    many in all, no more), and they bring the image no farther from the smoothed L1 minimum: its
+    L1 objective is no larger than after the scheduled ones. With a deadline soon, the fill stops
+    by it. Detects a fill that is skipped (a budgeted render that ends early when its solve was
+    estimated long), one that runs past its deadline or without end, or one that makes the image
+    worse (eps halved past the schedule's last, or weights from the wrong image)."""
+    import time
+
+    rng = np.random.default_rng(7)
+    img = rng.random((40, 36))
+    gx = poisson.grad_x(img) + rng.standard_cauchy(size=img.shape) * 0.02
+    gy = poisson.grad_y(img) + rng.standard_cauchy(size=img.shape) * 0.02
+    info = {}
+    base = poisson.solve_l1(img, gx, gy, reweights=6, info=info)
+    assert info["reweights"] == 6
+    filled = poisson.solve_l1(img, gx, gy, reweights=6, deadline=time.perf_counter() + 1e6, fill=True, info=info)
+    assert info["reweights"] == 12
+    assert poisson.l1_objective(filled, img, gx, gy) <= poisson.l1_objective(base, img, gx, gy) * (1 + 1e-6)
+    t0 = time.perf_counter()
+    poisson.solve_l1(img, gx, gy, reweights=10 ** 6, deadline=t0 + 0.2, fill=True, info=info)
+    assert time.perf_counter() - t0 < 0.2 + 0.1 and info["reweights"] < 2 * 10 ** 6

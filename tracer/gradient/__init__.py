@@ -15,6 +15,7 @@ from .films import GradientFilms  # noqa: F401
 
 SHIFTS = ("hybrid", "replay")
 ROUGHNESS = 0.001  # the hybrid shift reconnects between vertices rougher than this
+DIRECT_ROUGHNESS = 0.01  # the light a first vertex smoother than this reflects is the direct buffer's
 RECONSTRUCTIONS = poisson.RECONSTRUCTIONS + ("gradnet",)
 RECON_DEFAULTS = {"gradnet": {"weights": "gradnet", "correction": 1}}
 
@@ -53,27 +54,32 @@ def recon_settings(recon, opts=None):
     return s
 
 
-def check_settings(shift, recon, alpha, roughness=ROUGHNESS, recon_opts=None):
-    """(shift, recon, alpha, roughness, recon's settings) checked: one clear error for each bad
-    value."""
+def check_settings(shift, recon, alpha, roughness=ROUGHNESS, recon_opts=None, direct_roughness=DIRECT_ROUGHNESS):
+    """(shift, recon, alpha, roughness, recon's settings, direct_roughness) checked: one clear error
+    for each bad value."""
     if shift not in SHIFTS:
         raise unknown_name("shift", shift, SHIFTS)
     if isinstance(roughness, bool) or not isinstance(roughness, (int, float)) or not roughness >= 0:
         raise SettingsError(f"shift_roughness must be a number >= 0 (inf: never reconnect), got {roughness!r}")
+    if isinstance(direct_roughness, bool) or not isinstance(direct_roughness, (int, float)) or \
+            not direct_roughness >= 0:
+        raise SettingsError(f"direct_roughness must be a number >= 0 (0: only light seen directly is direct), "
+                            f"got {direct_roughness!r}")
     if recon not in RECONSTRUCTIONS:
         raise unknown_name("reconstruction", recon, RECONSTRUCTIONS)
     if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not (np.isfinite(alpha) and alpha > 0):
         raise SettingsError(f"recon_alpha must be a positive number, got {alpha!r}")
-    return shift, recon, float(alpha), float(roughness), recon_settings(recon, recon_opts)
+    return (shift, recon, float(alpha), float(roughness), recon_settings(recon, recon_opts),
+            float(direct_roughness))
 
 
-def warm_up(ctx, shift, roughness):
+def warm_up(ctx, shift, roughness, direct_roughness=DIRECT_ROUGHNESS):
     """Compile (or load from the cache) the kernels of `shift` before a render's clock starts."""
     if shift == "hybrid":
         from ..wave import WaveBuffers
         from . import hybrid
 
-        hybrid.warm_up(ctx, WaveBuffers(1), roughness)
+        hybrid.warm_up(ctx, WaveBuffers(1), roughness, direct_roughness)
 
 
 def _noisy_buffers(n):
@@ -121,14 +127,14 @@ def solve_time_estimate(recon, width, height, alpha, opts=None):
     return max(times[0] + per_pixel * (width * height - 64 * 64), 0.0)
 
 
-def reconstruct_buffers(buffers, recon, alpha, opts=None, deadline=None):
+def reconstruct_buffers(buffers, recon, alpha, opts=None, deadline=None, info=None):
     """(image (H,W,3) float64: the reconstruction of buffers["indirect"] from it and its gradients
     buffers["dx"], ["dy"] (and, for gradnet, the features albedo, normal, depth, and the variance
     buffers base_variance, dx_variance, dy_variance where the network reads them) plus
     buffers["direct"]; seconds the solve or the network's inference with its energy correction
     took). The buffers are those of a gpt render (solve's), so that one render can be
-    reconstructed every way. deadline (time.perf_counter seconds): where the L1 solve stops
-    reweighting (poisson.solve_l1)."""
+    reconstructed every way. deadline (time.perf_counter seconds): the time the L1 solve fills
+    and ends by; info (a dict): gets the L1 solve's "reweights" (poisson.solve_l1)."""
     t0 = _time.perf_counter()
     if recon == "gradnet":
         from . import gradnet
@@ -146,18 +152,18 @@ def reconstruct_buffers(buffers, recon, alpha, opts=None, deadline=None):
             rec = gradnet.energy_correction(rec, b["indirect"])
         image = rec.astype(np.float64)
     else:
-        image = poisson.reconstruct(recon, buffers["indirect"], buffers["dx"], buffers["dy"], alpha, deadline)
+        image = poisson.reconstruct(recon, buffers["indirect"], buffers["dx"], buffers["dy"], alpha, deadline, info)
     t_solve = _time.perf_counter() - t0
     return image + buffers["direct"], t_solve
 
 
-def solve(films, recon, alpha, opts=None, deadline=None):
+def solve(films, recon, alpha, opts=None, deadline=None, info=None):
     """Reconstruct from GradientFilms: (image (H,W,3) float64, the reconstruction of the indirect
     light plus the direct buffer; buffers {name: float32 (H,W,3), depth (H,W,1)}: base,
     base_variance, dx, dx_variance, dy, dy_variance, direct, indirect, and the features of a
     learned reconstruction: albedo (at the first vertex that is not a delta BSDF), normal, depth
     (divided by the largest, so in [0, 1]); seconds the solve (or the network's inference, with
-    its energy correction) took). deadline: reconstruct_buffers'."""
+    its energy correction) took). deadline, info: reconstruct_buffers'."""
     indirect, dx, dy = films.indirect.mean(), films.dx.mean(), films.dy.mean()
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     aovs = films.base.aovs()
@@ -169,7 +175,7 @@ def solve(films, recon, alpha, opts=None, deadline=None):
     variances = {"base_variance": f32(films.base.variance()), "dx_variance": f32(films.dx.variance()),
                  "dy_variance": f32(films.dy.variance())}
     image, t_solve = reconstruct_buffers(dict(features, **variances, indirect=indirect, dx=dx, dy=dy,
-                                              direct=films.direct.mean()), recon, alpha, opts, deadline)
+                                              direct=films.direct.mean()), recon, alpha, opts, deadline, info)
     buffers = {"base": f32(films.base.mean()), "dx": f32(dx), "dy": f32(dy), "direct": f32(films.direct.mean()),
                "indirect": f32(indirect), **variances, **features}
     return image, buffers, t_solve

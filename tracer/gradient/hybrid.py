@@ -7,6 +7,8 @@ MIS: its value is the path tracer's sample), and four offset paths, one per neig
 
 - At the camera the offset ray goes through p + e at the same position inside the pixel.
 - At each bounce from base vertex x_i to x_{i+1}, an offset at y_i
+  - *fails* where x_i and y_i lie on either side of `roughness` (a diffuse bounce has no partner in a
+    near-delta lobe), or, at the first vertex, of `direct_roughness`;
   - *reconnects* to x_{i+1} when x_i, x_{i+1} and y_i are all rough (bsdfs.bsdf_roughness above
     `roughness`; the environment counts as rough): the segment y_i -> x_{i+1} must be unblocked
     (else the shift fails), Jacobian |cos_y| d(x_i, x_{i+1})^2 / (|cos_x| d(y_i, x_{i+1})^2), both
@@ -39,9 +41,15 @@ and an emitter found by a BSDF sample (R, beta after the bounce)
 
     (beta_o Le_o - beta Le) / (1 + (pL / pB)^2 + R^2 (1 + (pL_o / pB_o)^2)).
 
+A pair whose bounce is a half-vector copy has no NEE partner (NEE reconnects): each side keeps its
+own NEE with the path tracer's weight, and an emitter found by the copied BSDF samples adds
+(w_o beta_o Le_o - w beta Le) / (1 + R^2), w and w_o the two paths' own BSDF weights against NEE.
 A failed offset leaves the base its ordinary two-technique weight, and a gradient of minus the
 base's weighted value. Russian roulette is the base's; a survivor divides beta and beta_o by q.
-Light seen directly from the camera goes to the direct buffer (L_cam), not into the gradients.
+The direct buffer (L_cam), added back after the solve and left out of the gradients, holds the
+light seen directly from the camera and the light a near-specular first vertex (GGX alpha below
+`direct_roughness`) reflects: sharp, bright highlights whose gradients are as noisy as the pixels
+and which a Poisson solve would spread over their neighbourhood.
 """
 
 import time as _time
@@ -60,7 +68,7 @@ from .offset_shading import add_next_event, shade_hybrid
 _CAMERA = CameraSource()
 
 
-def warm_up(ctx, buf, roughness):
+def warm_up(ctx, buf, roughness, direct_roughness):
     """Compile (or load) the hybrid kernels: a wave of no paths still calls each one."""
     hb = HybridBuffers(1)
     idx = np.zeros(0, np.int64)
@@ -69,23 +77,25 @@ def warm_up(ctx, buf, roughness):
     start_offsets(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, no_primary_samples(),
                   buf.key[:0], buf.pix[:0], *hb.offsets())
     shift_offsets(idx, t, prim, b1, b2, buf.ray_d[:0], surf, ctx.guide_state, roughness, *hb.base(), *hb.offsets())
-    _shade(ctx, buf, hb, idx, buf.ray_d[:0], (t, prim, b1, b2), no_primary_samples(), roughness)
+    _shade(ctx, buf, hb, idx, buf.ray_d[:0], (t, prim, b1, b2), no_primary_samples(), roughness, direct_roughness)
     _add_next_event(buf, hb, idx)
 
 
-def _shade(ctx, buf, hb, active, rd, hits, ps, roughness):
+def _shade(ctx, buf, hb, active, rd, hits, ps, roughness, direct_roughness):
     shade_hybrid(active, rd, *hits, ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth, ctx.rr_depth,
-                 roughness, *buf.path_state(), *buf.continuation(), *buf.shadow_rays(), *hb.base(), *hb.offsets(),
+                 roughness, direct_roughness, *buf.path_state(), *buf.continuation(), *buf.shadow_rays(), *hb.base(), *hb.offsets(),
                  *hb.nee_terms())
 
 
 def _add_next_event(buf, hb, active):
-    add_next_event(active, *buf.shadow_rays(), buf.L, hb.G, *hb.nee_terms())
+    add_next_event(active, *buf.shadow_rays(), buf.L, buf.L_cam, hb.G, *hb.nee_terms())
 
 
-def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness):
+def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness, direct_roughness):
     """Trace paths g0 .. g0+n-1 of a pass (base and four offsets, hybrid shift) and add them to
-    `films` (films.GradientFilms). buf: a WaveBuffers, hb: HybridBuffers, both of at least n."""
+    `films` (films.GradientFilms). buf: a WaveBuffers, hb: HybridBuffers, both of at least n;
+    roughness: the shift's threshold; direct_roughness: first vertices smoother than it put the
+    light they reflect into the direct buffer (shade_hybrid)."""
     accel = ctx.accel
     t0 = _time.perf_counter()
     ps = _CAMERA.start(ctx, buf, sample0, g0, n)
@@ -119,7 +129,7 @@ def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness):
             hb.status[sl[occ], ro_[occ]] = BLOCKED
             stats.shadow_rays += ri.size
         t0 = stats.tick("intersect", t0)
-        _shade(ctx, buf, hb, active, rd, (t, prim, b1, b2), ps, roughness)
+        _shade(ctx, buf, hb, active, rd, (t, prim, b1, b2), ps, roughness, direct_roughness)
         t0 = stats.tick("shade", t0)
         # Shadow rays: the base's, then the offsets' own; then the NEE terms with their weights
         kb = np.flatnonzero(buf.has_shadow[:na])

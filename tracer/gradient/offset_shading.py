@@ -3,6 +3,8 @@ emission and next-event estimation weighted over the four techniques of each pix
 base's next direction; add_next_event adds the NEE terms once the shadow rays are known. The
 weights are derived in hybrid.py's docstring."""
 
+import math
+
 from numba import prange
 
 from .. import bsdfs
@@ -10,13 +12,13 @@ from .._jit import jit, kernel
 from ..integrators.path import MAX_BOUNCES
 from ..lights import ENV_NONE, env_pdf, env_radiance, triangle_emission, triangle_light_pdf
 from ..guiding.contract import locate
-from ..rng import LIGHT, LIGHT_POS, bounce_dim, draw
+from ..rng import LIGHT, LIGHT_POS, RR, bounce_dim, draw
 from ..material import crosses, surface_at, surface_at_point
 from ..sampling import dot, to_local, triangle_point
 from ..shading import emitted_env, emitted_surface, light_sample_at, next_bounce, offset_point
 from ..shading import shadow_ray, write_aovs, write_shadow
 from .offsets import BLOCKED, CONNECTED, TRACED
-from .shift import is_rough, path_density, reconnection
+from .shift import is_near_specular, is_rough, path_density, reconnection
 
 # NeeTerms.mode of an offset at a bounce: no NEE term; the base's own weighted value alone (no
 # partner path); the partner shares the base's shadow ray (the offset sits at the base's vertex);
@@ -42,20 +44,21 @@ def _emitted_by(lt, tri_normal, q, wo, dist2, delta):
 
 @kernel
 def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
-                 ps, max_depth, rr_depth, roughness,
+                 ps, max_depth, rr_depth, roughness, direct_roughness,
                  beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open, prev_rec,
                  alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
-                 b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
+                 b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough, b_direct,
                  o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights,
                  o_trace, o_reconn, o_ray_o, o_ray_d, o_tmax, G, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o,
                  o_sh_d, o_sh_tmax,
-                 n_cn, n_pl, n_pb, vis_b, n_mode, n_co, n_rj, n_plo, n_pbo, vis):
+                 n_cn, n_pl, n_pb, vis_b, n_mode, n_co, n_rj, n_plo, n_pbo, vis, n_direct):
     """One bounce of base and offset paths: the vertices the offsets reached, emission (the base's
     as the path tracer's, the gradients' with the pair weights), NEE shifted to the offsets, the
     base's direction and roulette. The parameters are bundles splatted by hybrid.py (as
     integrators.path.shade's): entry k is path active[k], its hit t, prim, b1, b2; the scene's
-    material.Surfaces (whole), lights, guide state, primary samples; the limits max_depth, rr_depth and the shift's
-    roughness; the base's wave.PathState, Continuation and ShadowRays (its value for L); the
+    material.Surfaces (whole), lights, guide state, primary samples; the limits max_depth, rr_depth, the shift's
+    roughness and direct_roughness (a first vertex smoother than it puts the light it reflects, by NEE
+    or by its BSDF sample, into L_cam with the light seen directly: out of the gradients); the base's wave.PathState, Continuation and ShadowRays (its value for L); the
     offsets.BaseBounce this bounce writes (b_*); the Offsets (o_*: their hits of traced rays in
     hit_*, where o_trace; their own shadow rays o_sh, o_sh_*); the NeeTerms (n_*), weighted by
     add_next_event once the shadow rays are traced."""
@@ -63,6 +66,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
         i = active[k]
         alive[k] = False
         has_shadow[k] = False
+        n_direct[i] = False
         dk = depth[i]
         wray = (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2])
         b = (beta[i, 0], beta[i, 1], beta[i, 2])
@@ -117,11 +121,12 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
             if dk > 0 and not prev_delta[i]:
                 pl = triangle_light_pdf(lt, p, t[k] * t[k], -dot(wray, ng))
         cb = (b[0] * le[0], b[1] * le[1], b[2] * le[2])
+        direct = dk == 0 or (dk == 1 and b_direct[i])  # (the pair's offsets share it: see below)
         for c in range(3):
             L[i, c] += cb[c] * w
-            if dk == 0:
-                L_cam[i, c] = cb[c] * w
-        if dk > 0:
+            if direct:
+                L_cam[i, c] += cb[c] * w
+        if not direct:
             rb = pl / prev_pdf[i]
             for o in range(4):
                 if not o_alive[i, o]:  # the base's techniques alone: the path tracer's weight
@@ -160,16 +165,22 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
         wo = to_local((-wray[0], -wray[1], -wray[2]), sf.s, sf.t, sf.ns)
         kk = key[i]
         rough = is_rough(surf, m, roughness)
+        near = dk == 0 and is_near_specular(surf, m, direct_roughness)
+        if dk == 0:
+            b_direct[i] = near
         for o in range(4):
             if o_alive[i, o]:
                 if o_status[i, o] == TRACED:
-                    o_rough[i, o] = is_rough(surf, surf.material[o_prim[i, o]], roughness)
+                    mo = surf.material[o_prim[i, o]]
+                    o_rough[i, o] = is_rough(surf, mo, roughness)
                     # A rough vertex and a glossy one have no shift between them: a half-vector copy
                     # would pair a diffuse bounce with a near-delta lobe (an offset of density ~0) and
                     # leave the gradient without NEE. The shift fails at both ends alike (the rule
                     # reads the two vertices' classes only), so each side keeps the path tracer's
-                    # weights and the pair's gradient is the two pixels' own difference.
-                    if o_rough[i, o] != rough:
+                    # weights and the pair's gradient is the two pixels' own difference. So it does
+                    # between first vertices on either side of direct_roughness: a pair's paths are
+                    # then both direct light or both not.
+                    if o_rough[i, o] != rough or (dk == 0 and is_near_specular(surf, mo, direct_roughness) != near):
                         o_alive[i, o] = False
                 else:
                     o_rough[i, o] = rough
@@ -180,7 +191,9 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
         if not delta and gs.res[0] > 0:
             _, slot, a = locate(gs, x, ng if cos_o >= 0.0 else (-ng[0], -ng[1], -ng[2]), pix[i], dk)
 
-        # NEE: the base's sample (the path tracer's), shifted to each offset
+        # NEE: the base's sample (the path tracer's), shifted to each offset (at a near-specular first
+        # vertex: direct light, the base's alone, L_cam's and no gradient's)
+        n_direct[i] = near
         if not delta:
             ls = light_sample_at(
                 sf, lt, surf.tri, x, ng, cos_o, wo, b, gs, slot, a, surf.eps[p], surf.eps,
@@ -202,7 +215,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
                     n_cn[i, c] = b[c] * fb[c] * lel[c] / pll
                 zl = (x[0] + dist * wl[0], x[1] + dist * wl[1], x[2] + dist * wl[2])
                 rough_z = lt_tri < 0 or is_rough(surf, surf.material[lt_tri], roughness)
-                for o in range(4):
+                for o in range(4 if not near else 0):
                     if not o_alive[i, o]:
                         n_mode[i, o] = NEE_BASE_ALONE
                         continue
@@ -263,9 +276,23 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
 
         # The base's next direction and roulette (the path tracer's, from the guide's mixture)
         nx = next_bounce(sf, gs, slot, a, wo, ng, cos_o, b, gain[i], dk, rr_depth, MAX_BOUNCES, ps, kk, i, surf.mat_table)
-        if not nx.ok:
-            continue
         wiw, wt, pdf, dlt, nb, gn, q = nx.wi, nx.weight, nx.pdf, nx.delta, nx.beta, nx.gain, nx.q
+        if not nx.ok:
+            # A base whose throughput is 0 (a black BSDF, such as a light's) still carries its offsets:
+            # the other side of each pair weighs its paths as if this side found them too. Past
+            # rr_depth the offsets' own throughput plays the roulette.
+            if not (pdf > 0.0 and q == 1.0 and max(nb[0], max(nb[1], nb[2])) == 0.0 and dk + 1 < MAX_BOUNCES):
+                continue
+            bo = 0.0
+            for o in range(4):
+                if o_alive[i, o]:
+                    bo = max(bo, max(o_beta[i, o, 0], max(o_beta[i, o, 1], o_beta[i, o, 2])))
+            if not (bo > 0.0 and math.isfinite(bo)):
+                continue
+            if dk + 1 >= rr_depth:
+                q = min(bo / gn, 0.95)
+                if draw(ps, kk, i, bounce_dim(dk, RR)) >= q:
+                    continue
         no = offset_point(x, ng, wiw, surf.eps[p])
         for c in range(3):
             beta[i, c] = nb[c]
@@ -289,19 +316,22 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
 
 
 @kernel
-def add_next_event(active, sh_o, sh_d, sh_tmax, sh_L, has_shadow, L, G, n_cn, n_pl, n_pb, vis_b, n_mode, n_co, n_rj,
-                   n_plo, n_pbo, vis):
+def add_next_event(active, sh_o, sh_d, sh_tmax, sh_L, has_shadow, L, L_cam, G, n_cn, n_pl, n_pb, vis_b, n_mode, n_co,
+                   n_rj, n_plo, n_pbo, vis, n_direct):
     """Add the bounce's NEE once its shadow rays are traced (the base's ShadowRays, splatted, and
     the NeeTerms n_* with the visibilities): the base's value to L, and to each pair's
     gradient w (vis_o C_o - vis_b C_b), w = pL^2 / (pL^2 + pB^2 + (R J_L)^2 (pL_o^2 + pB_o^2)), where a
     blocked side's BSDF density is 0 (a BSDF sample cannot reach the light through the occluder).
-    NEE_BASE_ALONE (no partner): minus the base's own weighted value."""
+    NEE_BASE_ALONE (no partner): minus the base's own weighted value. n_direct: the base's value is
+    direct light (L_cam) too."""
     for k in prange(active.shape[0]):
         i = active[k]
         vb = has_shadow[k] and vis_b[k]
         if vb:
             for c in range(3):
                 L[i, c] += sh_L[k, c]
+                if n_direct[i]:
+                    L_cam[i, c] += sh_L[k, c]
         for o in range(4):
             mode = n_mode[i, o]
             if mode == NEE_NONE:

@@ -33,6 +33,7 @@ class BaseBounce(NamedTuple):
     pdf: np.ndarray  # (n,) float64 its density
     delta: np.ndarray  # (n,) bool sampled from a delta lobe
     rough: np.ndarray  # (n,) bool x_i is rough (and the lobe not delta)
+    direct: np.ndarray  # (n,) bool the first vertex is near-specular: the light it reflects is direct light
 
 
 class Offsets(NamedTuple):
@@ -84,6 +85,7 @@ class NeeTerms(NamedTuple):
     plo: np.ndarray  # (n, 4) float64
     pbo: np.ndarray  # (n, 4) float64
     vis: np.ndarray  # (n, 4) bool
+    direct: np.ndarray  # (n,) bool the base's NEE value is direct light (L_cam), not in the gradients
 
 
 class HybridBuffers:
@@ -95,13 +97,14 @@ class HybridBuffers:
         self.b_x, self.b_wo, self.b_wt = z(3), z(3), z(3)
         self.b_prim = z(d=np.int64)
         self.b_pdf = z()
-        self.b_delta, self.b_rough = z(d=np.bool_), z(d=np.bool_)
+        self.b_delta, self.b_rough, self.b_direct = z(d=np.bool_), z(d=np.bool_), z(d=np.bool_)
         # NEE terms, weighted once the shadow rays are known: the base's value, light and BSDF
         # densities; per offset a mode (offset_shading.NEE_*), value, R J_L, light and BSDF densities,
         # and the visibility of its own ray
         self.n_cn, self.n_pl, self.n_pb, self.vis_b = z(3), z(), z(), z(d=np.bool_)
         self.n_mode = z(4, d=np.int8)
         self.n_co, self.n_rj, self.n_plo, self.n_pbo, self.vis = z(4, 3), z(4), z(4), z(4), z(4, d=np.bool_)
+        self.n_direct = z(d=np.bool_)
         self.G = z(4, 3)  # per path and offset: the weighted gradient I(p + e) - I(p) found so far
         self.alive, self.rough, self.hv = z(4, d=np.bool_), z(4, d=np.bool_), z(4, d=np.bool_)
         self.lights = z(4, d=np.bool_)  # the pair's last bounce counts the light techniques (not a copy)
@@ -121,7 +124,8 @@ class HybridBuffers:
         return sum(a.nbytes for a in vars(HybridBuffers(1)).values() if isinstance(a, np.ndarray)) * size
 
     def base(self):
-        return BaseBounce(self.b_x, self.b_prim, self.b_wo, self.b_wt, self.b_pdf, self.b_delta, self.b_rough)
+        return BaseBounce(self.b_x, self.b_prim, self.b_wo, self.b_wt, self.b_pdf, self.b_delta, self.b_rough,
+                          self.b_direct)
 
     def offsets(self):
         return Offsets(self.alive, self.status, self.beta, self.R, self.x, self.prim, self.wo, self.pdf, self.delta,
@@ -131,7 +135,7 @@ class HybridBuffers:
 
     def nee_terms(self):
         return NeeTerms(self.n_cn, self.n_pl, self.n_pb, self.vis_b, self.n_mode, self.n_co, self.n_rj, self.n_plo,
-                        self.n_pbo, self.vis)
+                        self.n_pbo, self.vis, self.n_direct)
 
 
 @jit(inline="always")
@@ -185,6 +189,7 @@ def _finite(o_beta, o_R, i, o):
 
 @kernel
 def shift_offsets(active, t, prim, b1, b2, ray_d, surf, gs, roughness, b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
+                  b_direct,
                   o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights, o_trace,
                   o_reconn, o_ray_o, o_ray_d, o_tmax, G, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o, o_sh_d,
                   o_sh_tmax):

@@ -91,14 +91,18 @@ def solve_l2(base, gx, gy, alpha=0.2):
 
 
 def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=10, cg_rtol=1e-4, dtype=np.float32,
-             deadline=None):
+             deadline=None, fill=False, info=None):
     """The L1 screened Poisson reconstruction by IRLS (see the module docstring): `reweights`
     reweightings, each at most `cg_iterations` preconditioned CG steps to relative residual
     `cg_rtol`, started from the L2 solution. The iterations run in `dtype`, float32 by default
     (2.8x faster than float64 at 1280x720, the same error to 1e-6 of the image's scale); returns
     float64 of base's shape. The number of CG steps trades time for how far gradient outliers are suppressed
     (docs/gradient.md). deadline (time.perf_counter seconds): no reweighting starts that would
-    end after it, at the pace of the one before (the first always runs)."""
+    end after it, at the pace of the one before (the first always runs). fill: with a deadline, the
+    time left after the `reweights` reweightings goes to more of them at the last eps (at most
+    `reweights` more), each bringing the image nearer the smoothed L1 minimum, so that a budgeted
+    render whose solve was estimated long still spends its budget. info (a dict): gets
+    "reweights", the number run."""
     base, gx, gy = _check(base, gx, gy, alpha)
     dtype = np.dtype(dtype)
     base, gx, gy = (a.astype(dtype) for a in (base, gx, gy))
@@ -110,11 +114,14 @@ def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=10,
     precond = LinearOperator((n, n), matvec=lambda v: _inverse_l2(v.reshape(shape), lam).ravel(), dtype=dtype)
     n_terms = base.size + gx[:, :-1].size + gy[:-1].size
     t_step = 0.0
-    for k in range(int(reweights)):
+    reweights = int(reweights)
+    steps = 2 * reweights if (fill and deadline is not None) else reweights
+    done = 0
+    for k in range(steps):
         t0 = _time.perf_counter()
         if deadline is not None and k > 0 and t0 + t_step > deadline:
             break
-        eps = dtype.type(eps0 * 0.5 ** k)
+        eps = dtype.type(eps0 * 0.5 ** min(k, reweights - 1))
         wb = 1.0 / (np.abs(al * (img - base)) + eps)
         wx = 1.0 / (np.abs(grad_x(img) - gx) + eps)
         wy = 1.0 / (np.abs(grad_y(img) - gy) + eps)
@@ -132,6 +139,9 @@ def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=10,
         sol, _ = cg(op, rhs, x0=img.ravel(), rtol=cg_rtol, maxiter=int(cg_iterations), M=precond)
         img = sol.reshape(shape)
         t_step = _time.perf_counter() - t0
+        done += 1
+    if info is not None:
+        info["reweights"] = done
     return img.astype(np.float64)
 
 
@@ -143,12 +153,13 @@ def l1_objective(img, base, gx, gy, alpha=0.2):
                  + np.abs((grad_y(img) - gy)[:-1]).sum())
 
 
-def reconstruct(method, base, gx, gy, alpha=0.2, deadline=None):
-    """`method` l1, l2 or none (the base image itself); deadline: solve_l1's."""
+def reconstruct(method, base, gx, gy, alpha=0.2, deadline=None, info=None):
+    """`method` l1, l2 or none (the base image itself); deadline: solve_l1's, which fills the time
+    to it (fill=True); info: solve_l1's."""
     if method == "l2":
         return solve_l2(base, gx, gy, alpha)
     if method == "l1":
-        return solve_l1(base, gx, gy, alpha, deadline=deadline)
+        return solve_l1(base, gx, gy, alpha, deadline=deadline, fill=True, info=info)
     if method == "none":
         return np.asarray(base, dtype=np.float64)
     from ..errors import unknown_name

@@ -20,6 +20,13 @@ def is_rough(surf, m, roughness):
 
 
 @jit(inline="always")
+def is_near_specular(surf, m, limit):
+    """Material m (of surf) is smoother than `limit` (a GGX alpha; delta materials count as 0,
+    diffuse as infinitely rough): the light a first vertex of it reflects is the direct buffer's."""
+    return bsdfs.bsdf_roughness(bsdfs.bsdf_at(surf.mat_type, surf.mat_param, m)) < limit
+
+
+@jit(inline="always")
 def is_delta(surf, m):
     """Material m (of surf) scatters into discrete directions only."""
     return bsdfs.bsdf_is_delta(bsdfs.bsdf_at(surf.mat_type, surf.mat_param, m))

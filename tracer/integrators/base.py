@@ -56,6 +56,11 @@ class Integrator:
     def warm_up(self, ctx):
         """Compile (or load from the cache) this integrator's kernels beyond the path tracer's."""
 
+    def kernels(self):
+        """The kernels its passes run ("module.function", as _jit.kernels_cached takes them):
+        the path tracer's per-thread loop by default."""
+        return ("thread_loop.trace_paths",)
+
     def reserve(self, width, height):
         """Seconds of a time budget to keep for the work after the passes (e.g. a solve)."""
         return 0.0

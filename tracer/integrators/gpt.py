@@ -23,13 +23,16 @@ class GptIntegrator(Integrator):
                  elsewhere; every offset with its own pixel's mixture density) or replay (the same
                  random numbers from the neighbouring pixel; the default for odis, whose per-pixel
                  first-bounce maps the hybrid shift does not shift)
+    direct_roughness  hybrid: the light a first vertex smoother than this (GGX alpha) reflects joins
+                 the direct buffer (added after the solve, no gradients), as the light seen directly
     recon        l2 (keeps the image mean), l1 (darker at low spp), gradnet (learned; `weights`,
                  `correction` 0/1) or none (the base image); recon_alpha: the base's weight
     nee          1: next-event estimation with MIS; 0: none (replay shift only)
     """
 
     name = "gpt"
-    DEFAULTS = {"nee": 1, "shift": "hybrid", "roughness": gradient.ROUGHNESS, "recon": "l2", "recon_alpha": 0.2,
+    DEFAULTS = {"nee": 1, "shift": "hybrid", "roughness": gradient.ROUGHNESS,
+                "direct_roughness": gradient.DIRECT_ROUGHNESS, "recon": "l2", "recon_alpha": 0.2,
                 **{k: v for k, v in gradient.RECON_DEFAULTS["gradnet"].items()}}
     sweeps = 1
     film_kind = "gradient"
@@ -39,8 +42,9 @@ class GptIntegrator(Integrator):
         super().__init__(**settings)
         s = self.settings
         opts = {k: self.given[k] for k in gradient.RECON_DEFAULTS["gradnet"] if k in self.given}
-        self.shift, self.recon, self.recon_alpha, self.roughness, self.recon_settings = gradient.check_settings(
-            s["shift"], s["recon"], s["recon_alpha"], s["roughness"], opts)
+        self.shift, self.recon, self.recon_alpha, self.roughness, self.recon_settings, self.direct_roughness = \
+            gradient.check_settings(s["shift"], s["recon"], s["recon_alpha"], s["roughness"], opts,
+                                    s["direct_roughness"])
         if not self.nee and self.shift == "hybrid":
             raise SettingsError("integrator gpt: nee=0 goes with shift=replay (the hybrid shift's weights "
                                 "assume next-event estimation)")
@@ -76,7 +80,12 @@ class GptIntegrator(Integrator):
         return per, memory.GPT_FIXED_BYTES.get(self.recon, 0)
 
     def warm_up(self, ctx):
-        gradient.warm_up(ctx, self.shift, self.roughness)
+        gradient.warm_up(ctx, self.shift, self.roughness, self.direct_roughness)
+
+    def kernels(self):
+        if self.shift == "hybrid":  # its own (the replay shift traces through the path tracer's)
+            return ("offset_shading.shade_hybrid", "offsets.shift_offsets", "offset_shading.add_next_event")
+        return super().kernels()
 
     def reserve(self, width, height):
         self._solve_reserve = gradient.solve_time_estimate(self.recon, width, height, self.recon_alpha,
@@ -88,6 +97,7 @@ class GptIntegrator(Integrator):
                "recon_alpha": self.recon_alpha, "recon_settings": self.recon_settings}
         if self.shift == "hybrid":
             out["shift_roughness"] = self.roughness
+            out["direct_roughness"] = self.direct_roughness
         return out
 
     # the passes
@@ -101,7 +111,7 @@ class GptIntegrator(Integrator):
 
                 hb = HybridBuffers(session.buf.size)
                 self._wave = lambda ctx, buf, stats, sample0, g0, n: trace_hybrid_wave(
-                    ctx, buf, hb, self.films, sample0, g0, n, stats, self.roughness)
+                    ctx, buf, hb, self.films, sample0, g0, n, stats, self.roughness, self.direct_roughness)
             else:
                 from ..gradient.replay import trace_gradient_wave
 
@@ -122,15 +132,20 @@ class GptIntegrator(Integrator):
             films = self.films
         # samples: the base paths (each traced five paths), after the passes before
         stats.samples = int(self._samples0 + films.base.count.sum())
-        # with a budget, the L1 solve ends by its share of it (what is kept back after it: the denoiser)
+        # with a budget, the L1 solve fills its share of it and ends by it (what is kept back after
+        # it: the denoiser)
         deadline = None if session.time is None else \
             session.t_start + session.time - (session.reserve - self._solve_reserve)
-        image, buffers, t_solve = gradient.solve(films, self.recon, self.recon_alpha, self.recon_settings, deadline)
+        info = {}
+        image, buffers, t_solve = gradient.solve(films, self.recon, self.recon_alpha, self.recon_settings, deadline,
+                                                 info)
         st = snapshot()
         st["interrupted"] = interrupted
         for p_entry in st["passes"]:
             p_entry["weight"] = 1.0 if session.films[p_entry.pop("film")][0] is films.base else 0.0
         st["time_solve"] = t_solve  # included in time_total
+        if "reweights" in info:
+            st["l1_reweights"] = info["reweights"]
         base_mean = float(np.mean(buffers["base"], dtype=np.float64))
         # what the reconstruction did to the image's mean (l2 keeps it; l1 tends toward the median of
         # the base's samples, darker at low spp: docs/gradient.md), and its negative pixels
