@@ -1,8 +1,9 @@
 """Suite-wide set-up: the gradient-domain tracer's kernels compile in a second process while the
 other tests run.
 
-From an empty Numba cache the gpt kernels take about 150 s to compile on one core, the path
-tracer's about 55 s on another: compiling them at once uses both cores of a 2-core machine.
+From an empty Numba cache the gpt kernels (the hybrid shift's) take about 7.5 min to compile on
+one core of the 2-core VM, the path tracer's per-thread loop about 3.5 min and its wavefront 2.5
+min on the other: compiling them at once uses both cores.
 The tests that run gpt (their module is under tests/gradient or names gpt or tracer.gradient)
 are moved to the end of the run and each waits for the compile to finish before it starts, so
 they load the kernels from the cache; test_budget's timings are among them, so no timed test

@@ -601,8 +601,46 @@ def test_compile_notice(tmp_path, capsys, monkeypatch):
         _, _, err = render_cli(capsys, tmp_path, "n", size=8, spp=1, quiet=quiet)
         assert ("compiling the kernels" in err) == (not cached and not quiet), (cached, quiet, err)
     monkeypatch.undo()
-    assert _jit.kernels_cached("path.shade")  # after a render, in this cache
+    assert _jit.kernels_cached("thread_loop.trace_paths")  # after a render, in this cache
     assert not _jit.kernels_cached("integrator.no_such_kernel")
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")  # (the swallowed one)
+def test_sigint_swallowed_by_a_c_callback_during_the_compile_still_stops(tmp_path, capsys, monkeypatch):
+    """A Ctrl-C whose KeyboardInterrupt is raised inside a callback from C (as Numba's compile ends
+    in llvmlite's object-cache callback, through ctypes, which prints and drops it) still stops
+    the run before its passes: exit 130, no image. The warm-up here ends in such a callback that
+    sends SIGINT to this process. Detects the lost Ctrl-C (the render ran to its end), and a
+    handler that no longer raises at once while compiling (the first check: a plain SIGINT
+    during the warm-up must end it there, before the callback)."""
+    import ctypes
+    import importlib
+
+    render_mod = importlib.import_module("tracer.render")  # (tracer.render is also the function)
+
+    warm_up, calls = render_mod._warm_up, []
+
+    def interrupted_warm_up(*args):
+        warm_up(*args)
+        calls.append("warm")
+        if len(calls) == 1:  # Python's own handler path: raises where it lands
+            os.kill(os.getpid(), signal.SIGINT)
+            calls.append("not raised")
+        cb = ctypes.CFUNCTYPE(None)(lambda: [os.kill(os.getpid(), signal.SIGINT), sum(range(100))])
+        cb()
+
+    monkeypatch.setattr(render_mod, "_warm_up", interrupted_warm_up)
+    saved = signal.signal(signal.SIGINT, signal.default_int_handler)  # (pytest started with nohup ignores it)
+    try:
+        code, _, err = run_cli(capsys, CORNELL, "--spp", 2, "--width", 8, "--height", 8, "-o", tmp_path / "a.exr",
+                               "-q")
+        assert code == 130 and calls == ["warm"] and not (tmp_path / "a.exr").exists(), (code, calls, err)
+        calls.append("second")
+        code, _, err = run_cli(capsys, CORNELL, "--spp", 2, "--width", 8, "--height", 8, "-o", tmp_path / "b.exr",
+                               "-q")
+    finally:
+        signal.signal(signal.SIGINT, saved)
+    assert code == 130 and "interrupted" in err and not (tmp_path / "b.exr").exists(), (code, err)
 
 
 def test_sigint_writes_the_partial_image_and_exits_130(tmp_path):

@@ -232,15 +232,17 @@ def _list_integrators():
                   INTEGRATORS)
 
 
-def _compile_notice(guide, accel):
+def _compile_notice(guide, integ, accel):
     """One line before a render whose kernels are not in Numba's cache yet (a guess; see
-    _jit.kernels_cached), so that ~30 s of silence does not look like a hang."""
+    _jit.kernels_cached and render.compile_plan), so that minutes of silence do not look like a
+    hang. (render() logs the same line for a library user; the CLI drops that record.)"""
     from . import _jit
+    from .guiding import REGISTRY
+    from .render import COMPILE_NOTE, compile_plan
 
-    names = ["path.shade"] + (["photons.scatter", "spatial.accumulate"] if guide != "bsdf" else []) + \
-        (["numba_bvh._intersect_batch"] if accel == "numba" else [])
-    if not _jit.kernels_cached(*names):
-        _note("compiling the kernels (about 40 s, more with a guide or gpt; once per install or update of the tracer) ...")
+    guided = guide in REGISTRY and REGISTRY[guide][0] is not None
+    if not _jit.kernels_cached(*compile_plan(guided, integ, accel)):
+        _note(COMPILE_NOTE)
 
 
 def _note(text):
@@ -261,6 +263,8 @@ class _Warnings(logging.Handler):
         self.verbose = False
 
     def emit(self, record):
+        if getattr(record, "compile_notice", False):  # render()'s, for a library user: said already
+            return
         if self.hold:
             self.held.append(record)
         elif record.levelno >= logging.WARNING:
@@ -331,7 +335,7 @@ def _run(argv, warnings):
 
     def compile_notice():
         if notice[0]:
-            _compile_notice(guide_name, args.accel)
+            _compile_notice(guide_name, integ, args.accel)
             notice[0] = False
 
     scene = load_scene(args.scene, before_framing=compile_notice, define=define or None,

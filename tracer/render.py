@@ -19,7 +19,7 @@ import time as _time
 import numba
 import numpy as np
 
-from . import memory
+from . import _jit, memory
 from .bvh import make_accel
 from .bvh.numba_bvh import _NumbaThreads
 from .context import RenderContext
@@ -248,19 +248,23 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     t_setup = _time.perf_counter() - t_start
     ctx = RenderContext(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter, crop, integ.nee)
     ctx.path_loop = path_loop
-    # Trace throwaway paths first (recorded: the wavefront; not: the per-thread loop): they compile
-    # the kernels (or load them from the cache), so that neither the time budget nor the stats
-    # count Numba's compile.
+    # Trace throwaway paths first: they compile the kernels the render will run (or load them from
+    # the cache), so that neither the time budget nor the stats count Numba's compile. Recorded
+    # paths (a guide's training) run the wavefront, the rest the per-thread loop; a render that
+    # runs neither (gpt's hybrid shift without a guide) compiles neither.
+    kernels = compile_plan(g is not None, integ, acc.name, path_loop)
+    if not _jit.kernels_cached(*kernels):
+        log.warning(COMPILE_NOTE, extra={"compile_notice": True})
     t0 = _time.perf_counter()
-    trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats(), observe=lambda rec: None)
-    trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats())
     splits = g is not None and g.splits
-    if g is not None:
-        warm_up_guides(ctx)
-        g.warm_up(ctx)
-    if splits:
-        warm_up_splitting(ctx)
-    integ.warm_up(ctx)
+    sigint = _Sigint()
+    sigint.install(compiling=True)
+    try:
+        _warm_up(ctx, g, splits, integ, kernels, crop)
+    finally:
+        sigint.restore()
+    if sigint.requested:  # a Ctrl-C whose KeyboardInterrupt a callback from C swallowed (Numba's)
+        raise KeyboardInterrupt
     denoiser = den_reserve = None
     if denoise is not None:  # the device made, its weights loaded and its time measured off the clock
         from .denoise import Denoiser, reserve_seconds
@@ -289,8 +293,12 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         return _stats(scene, stats, session.passes, session.sample0, t_setup, t_start, t_render, settings, t_compile,
                       g)
 
-    sigint = _Sigint()
     reserve = integ.reserve(crop[2], crop[3]) + (den_reserve or 0.0) if time is not None else 0.0
+    if time is not None and reserve >= 0.5 * time:
+        log.warning(f"a time budget of {time:g} s: "
+                    f"{_reserve_text(integ.name, reserve - (den_reserve or 0.0), den_reserve)} on a "
+                    f"{crop[2]}x{crop[3]} image here, {reserve / time:.0%} of it"
+                    + (", so the render will overrun it (each pixel gets 2 samples first)" if reserve >= time else ""))
     session = Session(ctx, g, buf, stats, spp if time is None else None, time, t_start, bar, callback, snapshot,
                       lambda: sigint.requested, reserve=reserve, integrator=integ)
     interrupted = False
@@ -320,16 +328,66 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     return result
 
 
+COMPILE_NOTE = ("compiling the kernels this render runs, once per install or update of the tracer (on a 2-core VM: "
+                "about 4 min for the path tracer, 7 with a guide, 8 for gpt) ...")
+
+
+def _reserve_text(integrator, solve, den):
+    parts = ([f"{integrator}'s solve takes {solve:.2f} s"] if solve > 0 else []) + \
+        ([f"the denoiser {den:.2f} s"] if den else [])
+    return " and ".join(parts)
+
+
+def _warm_up(ctx, g, splits, integ, kernels, crop):
+    """Trace throwaway paths through each kernel of `kernels` (compile_plan's) and the guide's and
+    integrator's own warm-ups."""
+    if g is not None:
+        trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats(),
+                   observe=lambda rec: None)
+    if g is not None or "thread_loop.trace_paths" in kernels or "path.shade" in kernels:
+        trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats())
+    if g is not None:
+        warm_up_guides(ctx)
+        g.warm_up(ctx)
+    if splits:
+        warm_up_splitting(ctx)
+    integ.warm_up(ctx)
+
+
+def compile_plan(guided, integ, accel, path_loop="thread"):
+    """The kernels ("module.function") a render's warm-up compiles: the integrator's, the
+    wavefront's where a guide records paths or the per-thread loop cannot run (another accel,
+    path_loop="wave"), and the guides' photon tracer. What _jit.kernels_cached checks before a
+    render, to say that a compile is coming."""
+    names = list(integ.kernels())
+    if guided or (("thread_loop.trace_paths" in names) and (accel != "embree" or path_loop != "thread")):
+        names = [n for n in names if n != "thread_loop.trace_paths"] + ["path.shade"]
+        if guided and accel == "embree" and path_loop == "thread":
+            names.append("thread_loop.trace_paths")
+        if guided:
+            names.append("photons.scatter")
+    if accel == "numba":
+        names.append("numba_bvh._intersect_batch")
+    return tuple(names)
+
+
 class _Sigint:
     """Ctrl-C during the passes: the first SIGINT sets `requested` (the render stops before its
-    next wave), and puts Python's handler back, so that a second one interrupts at once. Only in
-    the main thread, and only over Python's default handler (a program's own is left alone)."""
+    next wave), and puts Python's handler back, so that a second one interrupts at once. While
+    compiling (install(compiling=True)) it also raises KeyboardInterrupt at once, as Python's
+    handler does, and `requested` keeps the Ctrl-C that a callback from C swallows: Numba's
+    machine-code generation calls back into Python when it ends (llvmlite's object cache, through
+    ctypes, which prints an exception raised there and drops it), so a Ctrl-C that came during it
+    was lost and the render ran to its end. Only in the main thread, and only over Python's
+    default handler (a program's own is left alone)."""
 
     def __init__(self):
         self.requested = False
         self._installed = False
+        self._compiling = False
 
-    def install(self):
+    def install(self, compiling=False):
+        self.requested, self._compiling = False, compiling
         if threading.current_thread() is threading.main_thread() and \
                 signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             signal.signal(signal.SIGINT, self._handle)
@@ -338,6 +396,8 @@ class _Sigint:
     def _handle(self, signum, frame):
         self.requested = True
         signal.signal(signal.SIGINT, signal.default_int_handler)
+        if self._compiling:
+            raise KeyboardInterrupt
 
     def restore(self):
         if self._installed:
