@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import SettingsError, unknown_name
 from . import poisson
-from .films import GradientFilms  # noqa: F401
+from .films import GradientFilms
 
 SHIFTS = ("hybrid", "replay")
 ROUGHNESS = 0.001  # the hybrid shift reconnects between vertices rougher than this
@@ -73,13 +73,24 @@ def check_settings(shift, recon, alpha, roughness=ROUGHNESS, recon_opts=None, di
             float(direct_roughness))
 
 
-def warm_up(ctx, shift, roughness, direct_roughness=DIRECT_ROUGHNESS):
-    """Compile (or load from the cache) the kernels of `shift` before a render's clock starts."""
+def warm_up(ctx, shift, roughness, direct_roughness=DIRECT_ROUGHNESS, n=4):
+    """Compile (or load from the cache) the kernels of `shift` before a render's clock starts:
+    each hybrid kernel on an empty wave, then a wave of n real paths into throwaway films (the
+    camera's, the films' and the other kernels only a real path reaches: without it a cold first
+    pass compiled them on the budget's clock, 11 s of a 12 s pass)."""
+    from ..wave import Stats, WaveBuffers
+
+    films = GradientFilms(int(ctx.crop[2]), int(ctx.crop[3]))
     if shift == "hybrid":
-        from ..wave import WaveBuffers
         from . import hybrid
 
         hybrid.warm_up(ctx, WaveBuffers(1), roughness, direct_roughness)
+        hybrid.trace_hybrid_wave(ctx, WaveBuffers(n), hybrid.HybridBuffers(n), films, 0, 0, n, Stats(), roughness,
+                                 direct_roughness)
+    else:
+        from .replay import trace_gradient_wave
+
+        trace_gradient_wave(ctx, WaveBuffers(n), films, 0, 0, n, Stats())
 
 
 def _noisy_buffers(n):
@@ -98,22 +109,25 @@ def solve_time_estimate(recon, width, height, alpha, opts=None):
     128 x 128 images (a smooth image, noise 0.3 on the base and 0.05 on the gradients) timed here,
     and a line through the two (a fixed cost per solve, the solvers' bounded iterations, and a cost
     per pixel; the DCTs' log N is left out). Scaling the 64 x 64 solve alone overestimated a
-    256 x 192 L1 solve 2.5x and left 4% of a 10 s budget unused. For gradnet, its inference and
-    energy correction (and the solve it corrects, for weights that correct one) on the noisy
-    128 x 128 image, with variance buffers, scaled by the pixel count."""
+    256 x 192 L1 solve 2.5x and left 4% of a 10 s budget unused. For gradnet, the same line through
+    its inference and energy correction (and the solve it corrects, for weights that correct one)
+    on the two noisy images, with variance buffers: scaling the 128 x 128 one alone by the pixel
+    count took its fixed cost 3.5 times at 320 x 180 (1.3 s kept for a 0.42 s inference)."""
     if recon == "none":
         return 0.0
-    if recon == "gradnet":
-        s = recon_settings(recon, opts)
-        b = _noisy_buffers(128)
-        z = np.zeros_like(b["indirect"])
-        v = np.full_like(z, 0.01)
-        b.update(direct=z, albedo=z + 0.5, normal=z, depth=z[..., :1] + 0.5, base_variance=v, dx_variance=v,
-                 dy_variance=v)
-        reconstruct_buffers(b, recon, alpha, s)
-        return reconstruct_buffers(b, recon, alpha, s)[1] * (width * height) / (128.0 * 128.0)
     times = []
     for n in (64, 128):
+        if recon == "gradnet":
+            s = recon_settings(recon, opts)
+            b = _noisy_buffers(n)
+            z = np.zeros_like(b["indirect"])
+            v = np.full_like(z, 0.01)
+            b.update(direct=z, albedo=z + 0.5, normal=z, depth=z[..., :1] + 0.5, base_variance=v, dx_variance=v,
+                     dy_variance=v)
+            if n == 64:
+                reconstruct_buffers(b, recon, alpha, s)  # the first call loads the weights
+            times.append(reconstruct_buffers(b, recon, alpha, s)[1])
+            continue
         nb = _noisy_buffers(n)
         b, gx, gy = nb["indirect"], nb["dx"], nb["dy"]
         if n == 64:
