@@ -329,7 +329,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
 
 
 COMPILE_NOTE = ("compiling the kernels this render runs, once per install or update of the tracer (on a 2-core VM: "
-                "about 4 min for the path tracer, 7 with a guide, 8 for gpt) ...")
+                "about 4.5 min for the path tracer, 8.5 with a guide, 8 for gpt) ...")
 
 
 def _reserve_text(integrator, solve, den):
