@@ -169,7 +169,7 @@ def test_hybrid_gradients_are_unbiased(name, roughness):
     - `cornell-black` (its red wall black, tests/scenes.blackened): a base whose throughput is 0
       must still carry its offsets, which the pair's other side weighs as found from here too;
       dropping them darkened the pairs across the wall's edges (as it did around every black-BSDF
-      light)."""
+      light): dx's sum z^2 was 582 over 211 pixels there, against a bound of 273."""
     for key, z in gradient_z(name, 16, 2048, 16384, shift="hybrid", shift_roughness=roughness):
         m = z.size
         assert m > 150
