@@ -73,7 +73,8 @@ CHART_METRICS = ("relMSE", "1-SSIM")  # where denoisers and learned reconstructi
 # odis: the pixels with a map, the gather window and how full it was)
 GUIDE_STATS = ("m", "layers", "width", "parameters", "val_nll", "epochs", "fallback", "zero_share_uniform",
                "zero_share_final", "second_moment_ratio", "inference_us_per_sample", "candidates_lit",
-               "pixels_guided", "pixels", "window", "centre_sparsity", "initial_lit")
+               "pixels_guided", "pixels", "window", "centre_sparsity", "initial_lit", "lit_share", "switched_off",
+               "voxels", "training")
 
 
 def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None, threads=None):
@@ -164,7 +165,7 @@ def chart(records, scene, methods, x_key, path, floor=None):
         if metric == "relMSE" and floor:
             ax.axhline(floor, color="grey", lw=1, ls=":", label="reference's noise floor")
         ax.set_xscale("log")
-        if any(line.get_ydata().max(initial=0.0) > 0 for line in ax.get_lines()):
+        if any(np.asarray(line.get_ydata(), float).max(initial=0.0) > 0 for line in ax.get_lines()):
             ax.set_yscale("log")
         if ticks:  # the budgets themselves as plain numbers, not crowded minor labels
             ax.set_xticks(sorted(ticks))

@@ -7,6 +7,10 @@ _ALGORITHM1 = {
     "iterations": "training iterations after the pilot pass",
     "spp_init": "N_c: training iteration t renders 2^t x this spp",
     "train_budget": "with --time: the share of the budget within which the pilot and training end",
+    "roulette": "Russian roulette: path (before the sampled ray), late (after it, once its emission is "
+                "counted), reference (late, survival 0.1-0.99 before the maps, 0.99 after: PPG's reference), "
+                "auto (reference with NEE off, else path)",
+    "records": "a camera record past the roulette: survivors (X, 0 when killed: learns q L_i) or unbiased (X / q)",
 }
 
 # the BSDF/guide mixing learned per voxel or leaf (guiding.mixing): grid, photon, ppg
@@ -82,7 +86,14 @@ GUIDES = {
     "ppg": {
         **_ALGORITHM1,
         **_MIXING,
-        "split_c": "a spatial leaf splits once its records of iteration k exceed c sqrt(2^k)",
+        "split_c": "a spatial leaf splits once its records of an iteration of n spp exceed c sqrt(n / split_spp)",
+        "split_spp": "2: the reference's threshold c sqrt(2^(k+1)) after iteration k of 4 x 2^k spp; 4: c sqrt(n / 4)",
+        "image": "all: the image weighs every training iteration and the final passes by inverse variance; "
+                 "final: the final passes alone (the reference keeps its last iteration)",
+        "empty": "a spatial leaf whose tree has no energy samples: bsdf (alone), or uniform (mixed, the reference's)",
+        "split": "final passes split paths whose throughput exceeds this (0: off)",
+        "window": "weight window: final passes split paths expected to bring more than this x their pixel (0: off)",
+        "window_low": "weight window: roulette paths expected to bring less than this x their pixel",
         "rho": "a directional quadrant splits when it holds more than this share of its tree's energy",
         "max_depth": "directional quadtree levels, at most (20 at most)",
         "alpha": "learn_alpha=0: the probability of BSDF sampling everywhere",

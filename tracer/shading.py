@@ -8,7 +8,7 @@ guide mixture exist once:
     next_event                      next-event estimation: light sample, BSDF, MIS weight, shadow ray
     sample_mixture / mixture_pdf    the direction from the one-sample MIS mixture of BSDF and guide
                                     (practical path guiding's sampleMat / pdfMat), and its density
-    russian_roulette                continue or end, on the throughput BSDF sampling would have had
+    survival, russian_roulette      continue or end, on the throughput BSDF sampling would have had
     next_bounce                     the two together, with their random numbers: a path's next step
 
 Conventions: `table` is the scene's COATED tables (material.Surfaces.mat_table, tracer.bsdfs);
@@ -223,13 +223,20 @@ def sample_mixture(sf, gs, slot, a, wo, ng, cos_o, u0, u1, u_lobe, u_strategy, t
 
 
 @jit(inline="always")
-def russian_roulette(beta, gain, u):
-    """Continue with probability q = min(max(beta) / gain, 0.95), deciding by u: (survives, beta / q, q).
-    beta / gain is the throughput BSDF sampling would have had: on beta itself the roulette would
-    undo a guide, since a guided direction's small weight f cos / p would be raised back to ~1 by
-    a matching chance of death (a path's survival density ~ f cos)."""
+def survival(beta, gain, gs):
+    """The roulette's survival probability for throughput beta and gain: clamp(max(beta) / gain,
+    gs.rr_min, gs.rr_max) (by default min(max(beta) / gain, 0.95)). beta / gain is the throughput
+    BSDF sampling would have had: on beta itself the roulette would undo a guide, since a guided
+    direction's small weight f cos / p would be raised back to ~1 by a matching chance of death (a
+    path's survival density ~ f cos)."""
     bmax = max(beta[0], max(beta[1], beta[2]))
-    q = min(bmax / gain, 0.95)
+    return min(max(bmax / gain, gs.rr_min), gs.rr_max)
+
+
+@jit(inline="always")
+def russian_roulette(beta, gain, u, gs):
+    """Continue with probability q = survival(beta, gain, gs), deciding by u: (survives, beta / q, q)."""
+    q = survival(beta, gain, gs)
     if u >= q:
         return False, beta, q
     return True, (beta[0] / q, beta[1] / q, beta[2] / q), q
@@ -248,6 +255,7 @@ class NextBounce(NamedTuple):
     beta: tuple  # the throughput after the bounce and the roulette
     gain: float  # product of p_bsdf / p_mixture along the path (1 without a guide)
     q: float  # the roulette's survival probability (1: no roulette)
+    beta_pre: tuple  # the throughput after the bounce, before the roulette
 
 
 @jit(inline="always")
@@ -256,7 +264,8 @@ def next_bounce(sf, gs, slot, a, wo, ng, cos_o, beta, gain, depth, rr_depth, max
     `depth` bounces, with throughput beta and gain so far: the direction from the mixture of the
     guide's map `slot` (probability 1 - a) and the BSDF, its random numbers drawn for path `row`
     of stream `key` (rng.draw: STRATEGY where a < 1, LOBE where the BSDF samples, DIR, DIR + 1),
-    then Russian roulette from rr_depth on (RR) and the cap max_bounces. A NextBounce."""
+    then Russian roulette from rr_depth on (RR; not here where gs.rr_late: the path tracer draws it
+    at the next vertex) and the cap max_bounces. A NextBounce."""
     u_strategy = draw(ps, key, row, bounce_dim(depth, STRATEGY)) if a < 1.0 else 1.0
     u_lobe = 0.0 if a < 1.0 and u_strategy >= a else draw(ps, key, row, bounce_dim(depth, LOBE))  # BSDF only
     wiw, wt, pdf, pbs, dlt, strategy, ratio = sample_mixture(
@@ -267,8 +276,9 @@ def next_bounce(sf, gs, slot, a, wo, ng, cos_o, beta, gain, depth, rr_depth, max
     bmax = max(nb[0], max(nb[1], nb[2]))
     ok = bmax > 0.0 and math.isfinite(bmax)
     q = 1.0
-    if ok and depth + 1 >= rr_depth:
-        ok, nb, q = russian_roulette(nb, gn, draw(ps, key, row, bounce_dim(depth, RR)))
+    pre = nb
+    if ok and depth + 1 >= rr_depth and gs.rr_late == 0:
+        ok, nb, q = russian_roulette(nb, gn, draw(ps, key, row, bounce_dim(depth, RR)), gs)
     if depth + 1 >= max_bounces:
         ok = False
-    return NextBounce(ok, wiw, wt, pdf, pbs, dlt, strategy, nb, gn, q)
+    return NextBounce(ok, wiw, wt, pdf, pbs, dlt, strategy, nb, gn, q, pre)

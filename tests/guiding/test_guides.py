@@ -30,7 +30,9 @@ GUIDES = [g for g in guide_names() if hasattr(REGISTRY[g][0], "fixed_state")]  #
 # narrow weight window (which splits and roulettes often), and maps reconstructed by the network;
 # switch_off 0 so that the final passes are guided whatever the small scenes predict, and one
 # variant where the guide always switches itself off after training (guiding.mixing); ppg with
-# the 2019 filters; photon with its maps replaced by reference maps before the final passes
+# the 2019 filters, with its old roulette, records, image and empty leaves, and with a narrow
+# weight window; grid with the late roulette, photon with unbiased records (guiding.base); photon
+# with its maps replaced by reference maps before the final passes
 VARIANTS = [(g, {"switch_off": 0}) for g in GUIDES] + [("photon", {"mixing": "eq14"}),
                                                        ("photon", {"light_guiding": 0.5, "switch_off": 0}),
                                                        ("photon", {"split": 1.5, "window": 0.0, "switch_off": 0}),
@@ -39,7 +41,13 @@ VARIANTS = [(g, {"switch_off": 0}) for g in GUIDES] + [("photon", {"mixing": "eq
                                                        ("photon", {"switch_off": 1e-9}),
                                                        ("photon", {"reference_photons": 16.0, "switch_off": 0}),
                                                        ("ppg", {"spatial_filter": "stochastic",
-                                                                "directional_filter": "box", "switch_off": 0})]
+                                                                "directional_filter": "box", "switch_off": 0}),
+                                                       ("ppg", {"roulette": "path", "records": "survivors",
+                                                                "image": "all", "empty": "bsdf", "switch_off": 0}),
+                                                       ("ppg", {"roulette": "reference", "window": 1.0,
+                                                                "window_low": 0.5, "switch_off": 0}),
+                                                       ("grid", {"roulette": "late", "switch_off": 0}),
+                                                       ("photon", {"records": "unbiased", "switch_off": 0})]
 CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96), ("ajar-textured", 48, 36, 96)]
 N_TESTS = len(CASES) * len(VARIANTS) * 3
 
@@ -81,6 +89,26 @@ def test_guided_mean_equals_bsdf_mean(case, variant, bsdf_renders):
     m_g, v_g = image_mean(r)
     m_b, v_b = image_mean(bsdf_renders[name])
     assert_z(m_g, v_g + v_b, m_b, n_tests=N_TESTS, what=f"{guide} on {name} vs bsdf")
+
+
+@pytest.mark.parametrize("guide", ["grid", "photon", "ppg"])
+def test_nee_off_guides_with_the_reference_roulette_keep_the_mean(guide):
+    """With NEE off, `roulette` auto plays the reference's roulette (drawn after the ray, survival
+    0.99 once there are maps): the guided Cornell box's mean equals the NEE-off path tracer's
+    within a two-sided z-test (Sidak over guides x channels). Detects a roulette, a late draw or a
+    record that lost its 1 / q, or a bias of the window's roulette (ppg's window on here)."""
+    name, w, h, spp = CASES[0]
+    opts = {"switch_off": 0, "roulette": "auto", **({"window": 1.0, "window_low": 0.5} if guide == "ppg" else {})}
+    g = make_guide(guide, **opts)
+    r = tracer.render(_scene(name, w, h), spp=spp, guide=g, integrator="path:nee=0", seed=303)
+    b = tracer.render(_scene(name, w, h), spp=4 * spp, integrator="path:nee=0", seed=304)
+    assert_clean(r)
+    assert_clean(b)
+    st = g.stats()
+    assert st["roulette"] == "reference" and st["voxels_with_map"] > 0, st
+    m_g, v_g = image_mean(r)
+    m_b, v_b = image_mean(b)
+    assert_z(m_g, v_g + v_b, m_b, n_tests=9, what=f"{guide} NEE off vs path NEE off")
 
 
 def _mirror_world(folder):
@@ -168,6 +196,43 @@ def test_records_carry_the_incident_radiance(tmp_path):
         assert (rec.strategy[:n] <= 0).all()  # no guide: BSDF only
         assert_z(first.mean(), first.var(ddof=1) / first.size, expected, n_tests=2,
                  what=f"recorded radiance (direct={direct})")
+
+
+@pytest.mark.parametrize("roulette,records", [("path", "survivors"), ("path", "unbiased"), ("late", "survivors"),
+                                              ("reference", "survivors")])
+def test_records_past_the_roulette(tmp_path, roulette, records):
+    """In the closed box of test_records_carry_the_incident_radiance every record, at any depth,
+    estimates Le / (1 - a), unless the roulette starves it: with `records` survivors and the
+    roulette drawn before the ray (roulette path), a record whose path is killed reads 0 and a
+    survivor X, so records past rr_depth estimate q L_i and their mean is low. The test checks
+    the three kinds that must be unbiased by a two-sided z-test of all records' mean (Sidak over 3),
+    and that the starved kind is detected below it (one-sided, z < -3), so that it can fail: a
+    roulette or record that lost the 1 / q, or the late roulette's emission, would show here."""
+    from tracer.bvh import make_accel
+    from tracer.context import RenderContext
+    from tracer.film import Film
+    from tracer.guiding.base import Guide
+    from tracer.guiding.contract import empty_state
+    from tracer.lights import build_lights
+
+    a, le = 0.5, 1.0
+    scene = tracer.load_scene(scenes.closed_box(tmp_path, a, le, width=16, height=16))
+    ctx = RenderContext(scene, make_accel("embree", scene.tri), build_lights(scene), 5, -1, 3, "box", (0, 0, 16, 16))
+    g = Guide()
+    g.roulette_settings({"roulette": roulette, "records": records})
+    ctx.guide_state = g.with_roulette(empty_state(), False)
+    n = 16 * 16 * 64
+    got = []
+    trace_wave(ctx, WaveBuffers(n), CameraSource(), Film(16, 16), 0, 0, n, Stats(), observe=lambda rec: got.append(rec))
+    rec = got[0]
+    x = rec.radiance[rec.strategy >= 0].astype(np.float64)
+    assert x.size > 2 * n  # paths past rr_depth are recorded
+    expected = le / (1 - a)
+    if (roulette, records) == ("path", "survivors"):
+        z = (x.mean() - expected) / np.sqrt(x.var(ddof=1) / x.size)
+        assert z < -3.0, f"records past the roulette should read q L_i on average, z = {z:.2f}"
+    else:
+        assert_z(x.mean(), x.var(ddof=1) / x.size, expected, n_tests=3, what=f"records ({roulette}, {records})")
 
 
 def test_frozen_guide_renders_final_passes_only_and_stays_unbiased(bsdf_renders):

@@ -45,11 +45,13 @@ def test_ppg_learns_where_the_light_comes_from():
 
 
 def test_filter_settings_are_checked():
-    """An unknown filter name is a SettingsError naming the setting and the allowed values."""
+    """An unknown filter, image, empty-leaf, roulette or records name is a SettingsError naming
+    the setting and the allowed values."""
     import pytest
 
     from tracer.errors import SettingsError
 
-    for key, bad in (("spatial_filter", "box"), ("directional_filter", "gaussian")):
+    for key, bad in (("spatial_filter", "box"), ("directional_filter", "gaussian"), ("image", "last"),
+                     ("empty", "zero"), ("roulette", "none"), ("records", "all")):
         with pytest.raises(SettingsError, match=f"{key} must be one of"):
             make_guide("ppg", **{key: bad})

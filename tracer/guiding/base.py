@@ -30,6 +30,25 @@ from ..errors import SettingsError
 from .contract import empty_state
 
 
+# Russian roulette a guide's passes play (its `roulette` setting; GuideState.rr_late, rr_min, rr_max):
+# "path" the path tracer's, drawn before the sampled ray is traced, survival min(max(beta) / gain,
+# 0.95); "late" the same survival drawn after the ray, once the emission it hits is counted, and not
+# after a delta bounce; "reference" as late with Practical Path Guiding's reference survival,
+# clamped to [0.1, 0.99] until the guide has maps and 0.99 after (guided_path.cpp); "auto" reference
+# with next-event estimation off, path with it on (docs/ppg.md, "Faithful to the reference")
+ROULETTES = ("auto", "path", "late", "reference")
+# What a camera record holds past the roulette (its `records` setting; GuideState.rec_q): "survivors"
+# the radiance X that came back on a surviving path, 0 on a killed one (expectation q L_i), "unbiased"
+# X / q (expectation L_i). With a late roulette a record's own emission comes before the draw.
+RECORD_KINDS = ("survivors", "unbiased")
+
+
+def _choice(name, v, allowed):
+    if v not in allowed:
+        raise SettingsError(f"guide setting {name} must be one of {', '.join(allowed)}, got {v!r}")
+    return v
+
+
 def _int(name, v, lo):
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
         raise SettingsError(f"guide setting {name} must be an integer >= {lo}, got {v!r}")
@@ -63,6 +82,33 @@ class Guide:
     # pixel (its training films, per-pixel maps), and bytes that do not grow with the image
     pixel_bytes = 0
     fixed_bytes = 0
+
+    training_in_image = True  # Algorithm 1's image weighs the training iterations in (False: final passes alone)
+    roulette = "path"  # ROULETTES
+    records = "survivors"  # RECORD_KINDS
+    roulette_used = "path"  # the roulette of this render ("auto" resolved by resolve_roulette)
+
+    def roulette_settings(self, s):
+        """Read the `roulette` and `records` settings from the dict s."""
+        self.roulette = _choice("roulette", s["roulette"], ROULETTES)
+        self.records = _choice("records", s["records"], RECORD_KINDS)
+        self.roulette_used = "path" if self.roulette == "auto" else self.roulette
+
+    def resolve_roulette(self, ctx):
+        """At prepare: the roulette this render plays ("auto": reference without NEE, else path)."""
+        if self.roulette == "auto":
+            self.roulette_used = "path" if ctx.nee else "reference"
+        return self.roulette_used
+
+    def with_roulette(self, state, maps):
+        """state with this guide's roulette (roulette_used) and records (ROULETTES, RECORD_KINDS);
+        maps: whether the guide has maps yet (the reference roulette's clamp)."""
+        rec_q = int(self.records == "unbiased")
+        if self.roulette_used == "path":
+            return state._replace(rec_q=rec_q) if rec_q else state
+        if self.roulette_used == "late":
+            return state._replace(rr_late=1, rec_q=rec_q)
+        return state._replace(rr_late=1, rr_min=0.99 if maps else 0.1, rr_max=0.99, rec_q=rec_q)
 
     @property
     def splits(self):

@@ -57,6 +57,15 @@ class GuideState(NamedTuple):
     qt_child: np.ndarray = _NO_QT_CHILD  # (Q, 4) int32 quadtree nodes' children (-1: leaf quadrant)
     qt_value: np.ndarray = _NO_QT_VALUE  # (Q, 4) float64 their quadrants' energy
     qt_root: np.ndarray = _NO_QT_ROOT  # (S,) int32 the root node of each slot's tree
+    # Russian roulette (tracer.shading.next_bounce, tracer.integrators.path.shade_vertex): survival
+    # clamp(max(beta) / gain, rr_min, rr_max); rr_late 0 draws it before the sampled ray is traced
+    # (Mitsuba 3's order), 1 after, once the emission the ray hits is counted, and never after a
+    # delta bounce (Practical Path Guiding's reference); rec_q 1 makes a record's throughput the
+    # one before the roulette, so that its radiance is X / q and its expectation L_i (0: X, q L_i)
+    rr_late: int = 0
+    rr_min: float = 0.0
+    rr_max: float = 0.95
+    rec_q: int = 0
 
 
 def empty_state(n_theta=2, n_phi=2):

@@ -6,14 +6,22 @@ Each camera vertex splats its incident radiance estimate L_i / pdf (luminance) i
 its spatial leaf, at its sampled direction (nearest filters by default; `spatial_filter`
 "stochastic" and `directional_filter` "box" are the 2019 notes' filters, tracer.guiding.sdtree).
 After each iteration the trees are built and become the sampling trees, spatial leaves holding more
-than c sqrt(spp / 4) records split (spp: the iteration's samples per pixel; PPG's threshold with its
-4 spp per pass), and the next building trees are refined where a quadrant holds more than `rho` of
-its tree's energy. The BSDF is sampled with probability `alpha` wherever a tree has energy, alone
-where it has none: 0.8 by default, as the paper's 0.5 makes fireflies here (a BSDF-sampled direction
-where the tree has no energy weighs 1 / alpha, and these multiply along a path; on `ajar` at 128
-spp, 0.5 gives 4.5x bsdf's relMSE, 56% of it in 20 pixels; 0.8 gives 1.0x; docs/ppg.md). With
-`direct` 0 (NEE on, the default) the records leave out the emission their direction hits (NEE
-samples it), PPG's "always" mode; with NEE off they carry it all. docs/ppg.md.
+than c sqrt(spp / split_spp) records split (spp: the iteration's samples per pixel; split_spp 2 is
+the reference's c sqrt(2^(k+1)) after its iteration k of 4 x 2^k spp), and the next building trees
+are refined where a quadrant holds more than `rho` of its tree's energy. A leaf whose tree holds no
+energy samples the uniform density (`empty` uniform, the reference's) or the BSDF alone (`empty`
+bsdf). The BSDF's probability is learned per leaf (`learn_alpha`, guiding.mixing) or `alpha`
+everywhere (0.8: the paper's 0.5 makes fireflies here, docs/ppg.md).
+
+With NEE off, Russian roulette is the reference's (`roulette` auto, guiding.base): drawn after
+the sampled ray, once the emission it hits is counted, surviving with 0.99 once the trees exist;
+the path tracer's roulette starves the trees of the long paths that carry light (docs/ppg.md,
+"Faithful to the reference"). With NEE on it is the path tracer's. The final passes may split paths and play the weight window
+(`split`, `window`, `window_low`; tracer.splitting) with each leaf's outgoing radiance. The image
+weighs every iteration in by inverse variance (`image` all) or is the final passes alone (`image`
+final, as the reference keeps its last iteration). With `direct` 0 (NEE on, the default) the
+records leave out the emission their direction hits (NEE samples it), PPG's "always" mode; with
+NEE off they carry it all. docs/ppg.md.
 """
 import math
 import time
@@ -22,6 +30,7 @@ import numpy as np
 
 from ..errors import SettingsError
 from ..film import Film
+from ..splitting import WeightWindow, observe_outgoing, outgoing
 from .base import Guide, _float, _int
 from .contract import QUADTREE, empty_state
 from .mixing import VarianceMixing
@@ -38,8 +47,11 @@ class PPGGuide(Guide):
     # (guiding.mixing, as the histogram guides'; the 2019 notes' learned fraction); 0: alpha everywhere
     DEFAULTS = {"iterations": 12, "spp_init": 1, "train_budget": 0.5, "split_c": 12000.0, "rho": 0.01,
                 "max_depth": 20, "alpha": 0.8, "direct": 0, "learn_alpha": 1, "alpha_min": 0.2, "alpha_max": 0.8,
-                "mis_min_samples": 32, "switch_off": 1.0, "spatial_filter": "nearest", "directional_filter": "nearest"}
-    FILTERS = {"spatial_filter": ("nearest", "stochastic"), "directional_filter": ("nearest", "box")}
+                "mis_min_samples": 32, "switch_off": 1.0, "spatial_filter": "nearest", "directional_filter": "nearest",
+                "roulette": "auto", "records": "unbiased", "split_spp": 2, "image": "all", "empty": "uniform",
+                "split": 0.0, "window": 0.0, "window_low": 0.05}
+    FILTERS = {"spatial_filter": ("nearest", "stochastic"), "directional_filter": ("nearest", "box"),
+               "image": ("all", "final"), "empty": ("bsdf", "uniform")}
     fixed_bytes = 64 << 20
 
     @property
@@ -71,6 +83,10 @@ class PPGGuide(Guide):
         for key, allowed in self.FILTERS.items():
             if s[key] not in allowed:
                 raise SettingsError(f"guide setting {key} must be one of {', '.join(allowed)}, got {s[key]!r}")
+        self.split_spp = _float("split_spp", s["split_spp"], 1.0)
+        self.splitting = WeightWindow(_float("split", s["split"], 0.0), _float("window", s["window"], 0.0),
+                                      _float("window_low", s["window_low"], 0.0))
+        self.roulette_settings(s)
         self.settings = s
         self.grid = None
 
@@ -83,8 +99,9 @@ class PPGGuide(Guide):
         self._state = empty_state()
         self.time_learning = self.time_update = 0.0
         self.peak_memory = 0
-        self.info = {"vertices": 0, "switched_off": False}
+        self.info = {"vertices": 0, "switched_off": False, "roulette": self.resolve_roulette(ctx), "records": []}
         self._alpha = np.full(1, self.alpha)  # per SD-tree node
+        self._out = _Outgoing()  # per SD-tree node, the weight window's outgoing radiance
         self._mixing = (VarianceMixing(self.alpha_min, self.alpha_max, self.q_thr, self.switch_off,
                                        self.records_direct(ctx))
                         if self.learn_alpha else None)
@@ -97,7 +114,13 @@ class PPGGuide(Guide):
         self._export(t)
 
     def state(self):
-        return self._state
+        return self.with_roulette(self._state, self.grid is not None and not self.info["switched_off"])
+
+    @property
+    def training_in_image(self):
+        """Whether the image weighs the training iterations in (`image` all) or is made of the final
+        passes alone (`image` final)."""
+        return self.settings["image"] == "all"
 
     def observe(self, rec):
         t0 = time.perf_counter()
@@ -110,10 +133,17 @@ class PPGGuide(Guide):
                                    spatial_filter=self.settings["spatial_filter"],
                                    directional_filter=self.settings["directional_filter"], seed=self._seed)
             energy = rec.radiance[keep].astype(np.float64) / rec.pdf[keep].astype(np.float64)
+            per = self.info["records"]  # per pass recorded (the pilot first): records, and those that carry light
+            while len(per) <= self.iteration:
+                per.append([0, 0])
+            per[self.iteration][0] += int(energy.size)
+            per[self.iteration][1] += int((energy > 0.0).sum())
             self.grid.record(rec.x[keep].astype(np.float64), rec.wi[keep].astype(np.float64), energy)
             self.info["vertices"] += int(keep.sum())
             if self._mixing is not None:
                 self._mixing.observe(rec, self._alpha)
+            if self.splitting.window > 0.0:
+                observe_outgoing(self._out, rec)
         self.time_learning += time.perf_counter() - t0
 
     def update(self):
@@ -123,8 +153,9 @@ class PPGGuide(Guide):
                 self._alpha = _grown(self._alpha, self.grid.child.size, self.alpha)
                 self._mixing.choose(self._alpha)  # before the split: children take their parent's weight
             old = self.grid.child.size
-            self.grid.step(self.c * math.sqrt(self._spp / 4.0))
+            self.grid.step(self.c * math.sqrt(self._spp / self.split_spp))
             self._alpha = _inherited(_grown(self._alpha, self.grid.child.size, self.alpha), self.grid.child, old)
+            self._out.grow(self.grid.child, old)
             self._state = self._export(self.grid, self._alpha)
             self.peak_memory = max(self.peak_memory, self.memory_bytes())
         self.iteration += 1
@@ -143,8 +174,16 @@ class PPGGuide(Guide):
             self._state = empty_state()
         return self.info["switched_off"]
 
+    def window_estimates(self):
+        """Per SD-tree node, the weight window's outgoing radiance (splitting.outgoing); None
+        before there is a tree."""
+        return outgoing(self._out) if self.grid is not None else None
+
+    def split_plan(self, films, crop):
+        return None if self.info["switched_off"] else super().split_plan(films, crop)
+
     def _export(self, tree, alpha=None):
-        child, axis, split, slot, qc, qv, roots = tree.export()
+        child, axis, split, slot, qc, qv, roots = tree.export(self.settings["empty"] == "uniform")
         s = 1.0 / tree.side
         alpha = np.full(child.size, self.alpha) if alpha is None else np.ascontiguousarray(alpha[: child.size])
         return empty_state()._replace(
@@ -192,7 +231,8 @@ class PPGGuide(Guide):
 
     def stats(self):
         out = dict(self.info)
-        out.update({"name": self.name, "iterations_done": self.iteration, "settings": dict(self.settings)})
+        out.update({"name": self.name, "iterations_done": self.iteration, "settings": dict(self.settings),
+                    "lit_share": [round(lit / max(n, 1), 5) for n, lit in self.info["records"]]})
         if self._mixing is not None:
             out["predicted_ratios"] = [round(r, 4) for r in self._mixing.ratios]
         t = self.grid
@@ -202,6 +242,30 @@ class PPGGuide(Guide):
             out.update({"voxels": int(leaves.size), "voxels_with_map": int((slot[leaves] >= 0).sum()),
                         "dtree_nodes": int(sum(t.sampling[i][0].shape[0] for i in leaves))})
         return out
+
+
+class _Outgoing:
+    """What splitting.observe_outgoing and splitting.outgoing read, per SD-tree node: the sum and
+    count of the radiance camera paths arriving in a leaf went on to collect."""
+
+    def __init__(self):
+        self.out_sum, self.out_n, self.n_nodes = np.zeros(1), np.zeros(1), 1
+
+    def grow(self, child, old):
+        """Extend to the tree's nodes; each node made by the last split (index `old` on) takes half
+        its parent's sum and count (the same mean)."""
+        n = child.size
+        if n <= self.n_nodes:
+            return
+        self.out_sum = np.concatenate([self.out_sum, np.zeros(n - self.n_nodes)])
+        self.out_n = np.concatenate([self.out_n, np.zeros(n - self.n_nodes)])
+        self.n_nodes = n
+        for i in np.flatnonzero(child >= 0):
+            c = child[i]
+            if c >= old:
+                for j in (c, c + 1):
+                    self.out_sum[j] = 0.5 * self.out_sum[i]
+                    self.out_n[j] = 0.5 * self.out_n[i]
 
 
 def _grown(alpha, n, fill):

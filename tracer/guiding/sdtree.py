@@ -162,13 +162,16 @@ class SDTree:
         self.building += [self.building[i]] * 2
         return [n, n + 1]
 
-    def export(self):
+    def export(self, empty_uniform=False):
         """(child, axis, split, slot, qt_child, qt_value, qt_root): the spatial tree with each
-        node's sampling tree (slot, -1 at inner nodes and at leaves whose tree holds no energy)
-        and the pool of those trees, for a GuideState."""
-        leaves = [i for i in self.leaves if self.sampling[i][1][0].sum() > 0.0]
+        node's sampling tree (slot, -1 at inner nodes, and at leaves whose tree holds no energy
+        unless empty_uniform: those then sample the uniform density 1 / 4 pi, as the reference's
+        empty trees) and the pool of those trees, for a GuideState."""
+        uniform = (np.full((1, 4), -1, np.int32), np.ones((1, 4)))
+        leaves = [i for i in self.leaves if empty_uniform or self.sampling[i][1][0].sum() > 0.0]
         slot = np.full(self.child.size, -1, np.int32)
         slot[leaves] = np.arange(len(leaves), dtype=np.int32)
-        trees = [self.sampling[i] for i in leaves] or [(np.full((1, 4), -1, np.int32), np.zeros((1, 4)))]
+        trees = [self.sampling[i] if self.sampling[i][1][0].sum() > 0.0 else uniform for i in leaves]
+        trees = trees or [(np.full((1, 4), -1, np.int32), np.zeros((1, 4)))]
         qc, qv, roots = _pool(trees)
         return self.child.copy(), self.axis.copy(), self.split.copy(), slot, qc, qv, roots.astype(np.int32)

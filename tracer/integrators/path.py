@@ -27,7 +27,10 @@ along that direction).
 Depths follow Mitsuba 3: `max_depth` 1 shows emitters seen directly, 2 adds direct light,
 -1 is unlimited (bounded at MAX_BOUNCES for safety); Russian roulette applies from the
 bounce numbered `rr_depth` on, continuing with probability min(max(beta / gain), 0.95), where
-beta / gain is the throughput BSDF sampling would have given (shading.russian_roulette).
+beta / gain is the throughput BSDF sampling would have given (shading.russian_roulette), drawn
+before the sampled ray is traced. A guide may set another (GuideState.rr_late, rr_min, rr_max:
+Practical Path Guiding's reference draws it after the ray, once the emission it hits is counted,
+so that a vertex's record always holds that emission) and records of X / q (rec_q).
 """
 import math
 import time
@@ -42,10 +45,11 @@ from ..film import aovs_of, combine_films
 from ..guiding.records import finalize_records
 from ..guiding.contract import locate
 from ..lights import ENV_NONE
-from ..rng import LIGHT, LIGHT_POS, bounce_dim, draw
+from ..rng import LIGHT, LIGHT_POS, RR, bounce_dim, draw
 from ..material import surface_at
 from ..sampling import dot, to_local, triangle_point
-from ..shading import (emitted_env, emitted_surface, next_bounce, next_event, offset_point, write_aovs, write_shadow)
+from ..shading import (emitted_env, emitted_surface, next_bounce, next_event, offset_point, survival, write_aovs,
+                       write_shadow)
 from ..splitting import merge_copies, split_wave
 from ..result import RenderResult, report_dark
 from ..wave import add_unoccluded, compact, sanitize
@@ -113,7 +117,7 @@ class Vertex(NamedTuple):
     pdf_mix: float
     pdf_bsdf: float
     fcos: float  # luminance of |f cos|
-    beta: tuple  # throughput after the vertex (0 where the path ended)
+    beta: tuple  # the record's throughput after the vertex: before the roulette with gs.rec_q, else after it (0 where the path ended)
 
 
 @jit(inline="always")
@@ -150,6 +154,7 @@ def shade_vertex(i, wray, tk, p, u1, u2, surf, lt, gs, ps, max_depth, rr_depth, 
     nb = contrib
     dk = depth[i]                                   # bounces so far (0 at the first hit)
     b = (beta[i, 0], beta[i, 1], beta[i, 2])        # throughput up to this vertex
+    b_in = b  # ... as the emission found here counts it (b / q after a late roulette)
     if dk == 0:
         for c in range(3):
             L_cam[i, c] = 0.0
@@ -171,10 +176,20 @@ def shade_vertex(i, wray, tk, p, u1, u2, surf, lt, gs, ps, max_depth, rr_depth, 
             add_emission(i, dk, b, le, w, L, L_cam)
         sf = surface_at(surf, p, u1, u2)  # the BSDF there, textures evaluated, and its frame
         delta = write_aovs(sf, i, dk, cos_o, tk, aov, aov_open)
-        # Continue past this vertex?
-        if not (max_depth >= 0 and dk + 1 >= max_depth):
+        kk = key[i]  # the path's random stream
+        # Continue past this vertex? With gs.rr_late, the roulette of the bounce that arrived here
+        # is drawn now, after its emission was counted (never after a delta bounce)
+        go = not (max_depth >= 0 and dk + 1 >= max_depth)
+        if go and gs.rr_late != 0 and dk >= rr_depth and not prev_delta[i]:
+            q = survival(b, gain[i], gs)
+            if draw(ps, kk, i, bounce_dim(dk - 1, RR)) >= q:
+                go = False
+            else:
+                b = (b[0] / q, b[1] / q, b[2] / q)
+                for c in range(3):
+                    beta[i, c] = b[c]
+        if go:
             wo = to_local((-wray[0], -wray[1], -wray[2]), sf.s, sf.t, sf.ns)
-            kk = key[i]  # the path's random stream
 
             # Where the guide's map is (node, slot) and the mixing weight a (probability of BSDF sampling)
             slot = -1
@@ -199,17 +214,20 @@ def shade_vertex(i, wray, tk, p, u1, u2, surf, lt, gs, ps, max_depth, rr_depth, 
             recorded = not delta and not nx.delta and pdf > 0.0
             wt = nx.weight
             fcos = (0.2126 * wt[0] + 0.7152 * wt[1] + 0.0722 * wt[2]) * pdf
+            if gs.rec_q != 0:
+                nb = nx.beta_pre  # the record's radiance is then X / q, unbiased for L_i
             if nx.ok:
-                nb = nx.beta
+                if gs.rec_q == 0:
+                    nb = nx.beta
                 alive = True
                 no = offset_point(x, ng, wiw, surf.eps[p])
                 for c in range(3):
-                    beta[i, c] = nb[c]
+                    beta[i, c] = nx.beta[c]
                 depth[i] = dk + 1
                 prev_pdf[i] = pdf
                 prev_delta[i] = nx.delta
                 gain[i] = nx.gain
-    return Vertex(alive, no, wiw, shadow, so, sd, tmax, contrib, found, le, w, b, pdf_in, sampled, recorded,
+    return Vertex(alive, no, wiw, shadow, so, sd, tmax, contrib, found, le, w, b_in, pdf_in, sampled, recorded,
                   x, nf, wiw, strategy, node, pdf, pbs, fcos, nb)
 
 

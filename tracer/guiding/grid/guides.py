@@ -97,6 +97,8 @@ COMMON = {
     "window": 0.0,  # > 0: final passes' weight window splits paths expected to bring more than this x their pixel
     "window_low": 0.2,  # ... and rouletted those expected to bring less than this x their pixel
     "switch_off": 1.0,  # > 0: final passes sample the BSDF alone where the guide predicts less gain (see finish_training)
+    "roulette": "auto",  # Russian roulette of the guide's passes (guiding.base.ROULETTES): auto, reference without NEE
+    "records": "survivors",  # what a camera record holds past the roulette (guiding.base.RECORD_KINDS)
 }
 MIXING = ("eq14", "variance")
 
@@ -190,6 +192,7 @@ class HistogramGuide(Guide):
                 raise SettingsError(f"guide {self.name!r}: reconstruct {s['reconstruct']!r} is trained on photon maps; "
                                     "it goes with guide photon")
             self.reconstructor.check_map(self.map_height, self.map_width)
+        self.roulette_settings(s)
         self.settings = s
         self.grid = None
 
@@ -211,12 +214,13 @@ class HistogramGuide(Guide):
         self.reconstructor.time_inference = 0.0  # network inference (reconstruct cnn); not in time_update
         self.reconstructor.maps_inferred = 0
         self.peak_memory = 0
-        self.info = {"photons": 0, "deposits": 0, "photon_rays": 0, "vertices": 0, "switched_off": False}
+        self.info = {"photons": 0, "deposits": 0, "photon_rays": 0, "vertices": 0, "switched_off": False,
+                     "roulette": self.resolve_roulette(ctx)}
         self._mixing = VarianceMixing(self.alpha_min, self.alpha_max, self.q_thr, self.switch_off,
                                       self.records_direct(ctx))
 
     def state(self):
-        return self._state
+        return self.with_roulette(self._state, self.grid is not None and not self.info["switched_off"])
 
     def observe(self, rec):
         """Vertices of one wave of camera paths (a Records view)."""
@@ -390,7 +394,7 @@ class GridGuide(HistogramGuide):
 
     name = "grid"
     # coarser and smoother than the photon maps: camera-path estimates (radiance |cos| / pdf) are noisier
-    DEFAULTS = dict(COMMON, split_c=4000.0, resolution=8, sigma=2.0)
+    DEFAULTS = dict(COMMON, split_c=4000.0, resolution=8, sigma=2.0, roulette="path")
 
     def _initial_data(self, pilot):
         g = self.grid

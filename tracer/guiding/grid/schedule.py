@@ -46,7 +46,7 @@ def algorithm1(session, guide):
         session.phase(f"train {t}/{guide.iterations}")
         session.run_pass(film, n, "train", learn=True)
         guide.training["trained"] = t
-    if guide.finish_training():
+    if guide.finish_training() or not guide.training_in_image:
         session.leave_out_training()
     session.ctx.guide_state = guide.state()  # what the final passes sample from
     session.final_passes(guide.split_plan(session.training_films(), session.ctx.crop))
