@@ -182,8 +182,9 @@ class PPGGuide(Guide):
     def split_plan(self, films, crop):
         return None if self.info["switched_off"] else super().split_plan(films, crop)
 
-    def _export(self, tree, alpha=None):
-        child, axis, split, slot, qc, qv, roots = tree.export(self.settings["empty"] == "uniform")
+    def _export(self, tree, alpha=None, empty=None):
+        empty = self.settings["empty"] if empty is None else empty
+        child, axis, split, slot, qc, qv, roots = tree.export(empty == "uniform")
         s = 1.0 / tree.side
         alpha = np.full(child.size, self.alpha) if alpha is None else np.ascontiguousarray(alpha[: child.size])
         return empty_state()._replace(
@@ -194,7 +195,7 @@ class PPGGuide(Guide):
     def fixed_state(self, sampling_map):
         """A state whose whole space (the cube [-1, 1]^3) is one leaf whose tree holds the map
         (n_theta, n_phi), both powers of two, rows in z and columns in phi as guiding.directional's,
-        for the sampler contract tests."""
+        for the sampler contract tests (an all-zero map is no map, whatever `empty` says)."""
         m = np.asarray(sampling_map, dtype=np.float64)
         h, w = m.shape
         if h & (h - 1) or w & (w - 1):
@@ -220,7 +221,7 @@ class PPGGuide(Guide):
         node(0, 0, r)
         tree = SDTree(-np.ones(3), np.ones(3), self.rho, self.max_depth)
         tree.sampling[0] = (np.array(child, np.int32), np.array(value))
-        return self._export(tree)
+        return self._export(tree, empty="bsdf")  # an all-zero map is no map
 
     def memory_bytes(self):
         t = self.grid
