@@ -480,7 +480,8 @@ def test_summary_says_when_a_guide_trained_fewer_iterations(tmp_path, capsys):
     assert "grid trained 0 of 5 iterations after its pilot: the training share was used up" in text
     assert training["why"] in text
     text, stats = run("full", "--guide", "grid:iterations=1", "--spp", 8)
-    assert stats["guide_stats"]["training"] == {"iterations": 1, "trained": 1, "stopped": None, "why": ""}
+    assert stats["guide_stats"]["training"] == {"iterations": 1, "trained": 1, "spp": [2], "shortened": False,
+                                                "stopped": None, "why": ""}
     assert sum(p["kind"] == "train" for p in stats["passes"]) == 1
     assert "trained" not in text, text
 
@@ -726,7 +727,7 @@ def test_library_errors_are_tracer_errors(tmp_path):
     with pytest.raises(tracer.SettingsError, match="valid: .*width"):
         tracer.load_scene(CORNELL, widht=3)
     scene = tracer.load_scene(CORNELL, width=8, height=8)
-    with pytest.raises(tracer.SettingsError, match="unknown guide 'x'; valid: bsdf"):
+    with pytest.raises(tracer.SettingsError, match="unknown guide 'x'; valid: auto, bsdf"):
         tracer.render(scene, spp=1, guide="x")
     with pytest.raises(tracer.SettingsError, match="max_depth"):
         tracer.render(scene, spp=1, max_depth=0)

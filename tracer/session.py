@@ -133,6 +133,12 @@ class Session:
         2 spp everywhere."""
         self.films = [(f, "pilot" if k == "train" else k) for f, k in self.films]
 
+    def discard(self, films):
+        """These films get no weight in the image (kind "discard"): e.g. the trials of the methods
+        guiding.auto did not pick."""
+        drop = {id(f) for f in films}
+        self.films = [(f, "discard" if id(f) in drop else k) for f, k in self.films]
+
     def training_films(self):
         """The films rendered so far (what a guide's split plan estimates pixels from)."""
         return [f for f, _ in self.films]

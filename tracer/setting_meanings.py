@@ -83,6 +83,11 @@ GUIDES = {
         "reference_per_bin": "maps=reference: probes per directional bin",
         "batch": "maps per torch call",
     },
+    "auto": {
+        "candidates": "the samplers tried, names joined by + (from bsdf, grid, photon, ppg); the render goes on "
+                      "with the one whose trial predicts the least relMSE x seconds",
+        "trial_iterations": "training iterations of Algorithm 1 each guide runs before the choice (bsdf: 2^this spp)",
+    },
     "ppg": {
         **_ALGORITHM1,
         **_MIXING,

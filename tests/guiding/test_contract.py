@@ -21,7 +21,8 @@ from tracer.guiding.directional import bin_of_batch
 from tracer.guiding.contract import guide_pdf_batch, guide_sample_batch
 from tests.test_cli import CORNELL
 
-NO_TABLE = {"bsdf": "no guide", "pss": "a warp of primary samples (its own test below)"}
+NO_TABLE = {"bsdf": "no guide", "pss": "a warp of primary samples (its own test below)",
+            "auto": "renders with one of bsdf, grid, photon and ppg, each tested under its own name"}
 GUIDES = [name for name in REGISTRY if name not in NO_TABLE]  # guides whose maps are tables
 H, W = 8, 16
 

@@ -136,6 +136,53 @@ def test_grid_lookup_matches_the_boxes_after_splits(n_class):
     assert (root == cell * n_class + cls).all()
 
 
+def test_mid_plane_splits_pass_each_voxels_data_to_its_children():
+    """split_mid splits a level at a time in batches: every leaf whose count c exceeds the
+    threshold T becomes 2^L leaves, L = min(max_levels, the least k with c / 2^k <= T), that tile
+    its box, each with its histogram, counts and statistics divided by 2^L (halving is exact in
+    binary floating point, so they are compared exactly) and its map flag; leaves at or below
+    T keep theirs. Detects a child that loses or doubles its parent's data, a wrong split count or
+    level, a child box outside its parent's, and a slot shared by two leaves."""
+    rng = np.random.default_rng(7)
+    g = HierarchicalGrid(np.zeros(3), np.ones(3), 3, 4, 8)
+    g.visit(g.locate(rng.random((4000, 3))), 0)
+    leaves0 = g.leaves()
+    leaves0 = leaves0[g.data_slot[leaves0] >= 0]
+    slots0 = g.data_slot[leaves0]
+    g.power[slots0] = rng.random((slots0.size, g.K)).astype(np.float32)
+    g.count[slots0] = rng.integers(0, 9, (slots0.size, g.K)).astype(np.float32)
+    counts = rng.choice([3.0, 10.0, 25.0, 70.0, 500.0], leaves0.size)
+    g.node_count[leaves0] = counts
+    g.out_sum[leaves0] = rng.random(leaves0.size)
+    g.map_ok[leaves0] = rng.random(leaves0.size) < 0.5
+    before = {int(nd): (g.power[g.data_slot[nd]].copy(), g.count[g.data_slot[nd]].copy(), g.out_sum[nd],
+                        bool(g.map_ok[nd]), g.box_lo[nd].copy(), g.box_hi[nd].copy()) for nd in leaves0}
+    T, levels = 12.0, 3
+    expect_levels = [0 if c <= T else min(levels, int(np.ceil(np.log2(c / T)))) for c in counts]
+    n_split = g.split_mid(T, levels)
+    assert n_split == sum(2 ** L - 1 for L in expect_levels)
+    parent = np.full(g.n_nodes, -1)
+    inner = np.flatnonzero(g.child[: g.n_nodes] >= 0)
+    parent[g.child[inner]] = inner
+    parent[g.child[inner] + 1] = inner
+    leaves = g.leaves()
+    root = leaves.copy()
+    while (parent[root] >= 0).any():
+        root = np.where(parent[root] >= 0, parent[root], root)
+    slots = g.data_slot[leaves[np.isin(root, leaves0)]]
+    assert (slots >= 0).all() and np.unique(slots).size == slots.size
+    for nd, L in zip(leaves0, expect_levels):
+        kids = leaves[root == nd]
+        p, c, o, ok, lo, hi = before[int(nd)]
+        assert kids.size == 2 ** L
+        np.testing.assert_array_equal(g.power[g.data_slot[kids]], np.tile(p / 2 ** L, (kids.size, 1)))
+        np.testing.assert_array_equal(g.count[g.data_slot[kids]], np.tile(c / 2 ** L, (kids.size, 1)))
+        assert (g.out_sum[kids] == o / 2 ** L).all()
+        assert (g.map_ok[kids] == ok).all() and (g.depth[kids] == g.depth[nd] + L).all()
+        assert (g.box_lo[kids] >= lo).all() and (g.box_hi[kids] <= hi).all()
+        assert np.isclose(np.prod(g.box_hi[kids] - g.box_lo[kids], axis=1).sum(), np.prod(hi - lo))
+
+
 def test_grid_recycles_unvisited_voxels():
     g = HierarchicalGrid(np.zeros(3), np.ones(3), 4, 4, 8)
     pts = np.random.default_rng(4).random((1000, 3))

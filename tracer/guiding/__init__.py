@@ -2,7 +2,8 @@
 
 `bsdf` is plain BSDF importance sampling (no guide). `grid` and `photon` are histogram guides on
 a hierarchical grid (tracer/guiding/grid/guides.py), learned from camera paths and from photons;
-`ppg` is Practical Path Guiding's SD-tree (tracer/guiding/ppg.py).
+`ppg` is Practical Path Guiding's SD-tree (tracer/guiding/ppg.py); `auto` picks one of bsdf,
+grid, photon and ppg from a short trial of each (tracer/guiding/auto.py).
 Each guide is built from a settings dict; unknown names or settings are errors that list the
 valid ones. A guide is a `base.Guide`: `prepare(scene, ctx)`, `state()` (the arrays the
 integrator's kernels read, a `contract.GuideState`), `observe(records)` (the vertices of a wave of
@@ -12,6 +13,7 @@ camera paths), `update()` (between passes), `schedule(session)` (its passes), pl
 import copy
 
 from ..errors import SettingsError, unknown_name
+from .auto import AutoGuide
 from .base import Guide
 from .grid.guides import GridGuide, PhotonGuide
 from .odis.guide import OdisGuide
@@ -26,6 +28,7 @@ REGISTRY = {
     "pss": (PSSGuide, PSSGuide.DEFAULTS),
     "odis": (OdisGuide, OdisGuide.DEFAULTS),
     "ppg": (PPGGuide, PPGGuide.DEFAULTS),
+    "auto": (AutoGuide, AutoGuide.DEFAULTS),
 }
 
 

@@ -71,6 +71,7 @@ class Guide:
     spp_init = 1  # Algorithm 1's N_c: iteration t renders 2^t N_c spp
     train_budget = 1.0  # with a time budget: share of it that learning may take
     training = None  # Algorithm 1's schedules: how training went (grid.schedule.training_record)
+    train_spp = None  # Algorithm 1's schedules: spp of the training pass being run (the pilot's: 1)
     splitting = None  # splitting.WeightWindow, or None (never splits)
     camera_paths = True  # final passes start at the camera (False: from the guide's own source, e.g. pss's warp)
     pixel_maps = False  # the state holds per-pixel first-bounce maps (GuideState.pixel_slot)
@@ -135,6 +136,12 @@ class Guide:
 
     def update(self):
         pass
+
+    def min_last_spp(self, prev):
+        """The fewest spp worth running a shortened last training iteration for, after one of
+        `prev` spp (grid.schedule): as many as the last, for guides whose maps each iteration's
+        data rebuild alone."""
+        return prev
 
     def training_done(self):
         """Before each training iteration of Algorithm 1: whether to end training now."""

@@ -153,7 +153,8 @@ class PPGGuide(Guide):
                 self._alpha = _grown(self._alpha, self.grid.child.size, self.alpha)
                 self._mixing.choose(self._alpha)  # before the split: children take their parent's weight
             old = self.grid.child.size
-            self.grid.step(self.c * math.sqrt(self._spp / self.split_spp))
+            spp = self._spp if self.train_spp is None else self.train_spp  # the schedule's, where it ran one
+            self.grid.step(self.c * math.sqrt(spp / self.split_spp))
             self._alpha = _inherited(_grown(self._alpha, self.grid.child.size, self.alpha), self.grid.child, old)
             self._out.grow(self.grid.child, old)
             self._state = self._export(self.grid, self._alpha)

@@ -476,7 +476,16 @@ class PhotonGuide(HistogramGuide):
         return env_aim(x, w / np.linalg.norm(w, axis=1, keepdims=True), centre, radius)
 
     def _n_photons(self, iteration):
-        return int(round(self.photons_per_pixel * self.ctx.n_pixels * self.spp_init * 2 ** iteration))
+        """photons_per_pixel x pixels x the spp of the iteration's camera pass (train_spp where the
+        schedule set it, else 2^iteration N_c)."""
+        spp = self.spp_init * 2 ** iteration if iteration == 0 or self.train_spp is None else self.train_spp
+        return int(round(self.photons_per_pixel * self.ctx.n_pixels * spp))
+
+    def min_last_spp(self, prev):
+        """The maps keep every iteration's photons, so a shortened last iteration adds to them: it
+        runs with half the previous iteration's spp or more (below that its update's fixed costs,
+        the reconstruction of every map, outweigh what it adds)."""
+        return max(1, prev // 2)
 
     def _trace(self, iteration, sink, guided=False, n_photons=None):
         """Trace `n_photons` (default: the iteration's count) photons into sink, counted in info."""

@@ -182,35 +182,41 @@ class HierarchicalGrid:
             b[:cap] = a
             setattr(self, name, b)
 
-    def _new_slot(self, node):
-        if self.free:
-            s = self.free.pop()
-        else:
-            s = self.n_slots
-            self.n_slots += 1
-            cap = self.power.shape[0]
-            if self.n_slots > cap:
-                for name in SLOT_ARRAYS + ("slot_node",):
-                    a = getattr(self, name)
-                    b = np.zeros((2 * cap,) + a.shape[1:], a.dtype) if name != "slot_node" else np.full(2 * cap, -1, a.dtype)
-                    b[:cap] = a
-                    setattr(self, name, b)
+    def _new_slots(self, nodes):
+        """Data slots (zeroed, no usable map) for these nodes: freed ones first, then new rows."""
+        nodes = np.asarray(nodes, np.int64)
+        k = nodes.size
+        take = min(k, len(self.free))
+        reused = [self.free.pop() for _ in range(take)]
+        fresh = np.arange(self.n_slots, self.n_slots + k - take, dtype=np.int64)
+        self.n_slots += k - take
+        cap = self.power.shape[0]
+        if self.n_slots > cap:
+            new = max(self.n_slots, 2 * cap)
+            for name in SLOT_ARRAYS + ("slot_node",):
+                a = getattr(self, name)
+                b = np.full((new,) + a.shape[1:], -1 if name == "slot_node" else 0, a.dtype)
+                b[:cap] = a
+                setattr(self, name, b)
+        s = np.concatenate([np.asarray(reused, np.int64), fresh])
         for name in SLOT_ARRAYS:
             getattr(self, name)[s] = 1.0 if name in ("wsum", "iwsum") else 0
-        self.slot_node[s] = node
-        self.data_slot[node] = s
-        self.map_ok[node] = False
-        self.imap_ok[node] = False
+        self.slot_node[s] = nodes
+        self.data_slot[nodes] = s
+        self.map_ok[nodes] = False
+        self.imap_ok[nodes] = False
         return s
 
-    def release(self, node):
-        s = self.data_slot[node]
-        if s >= 0:
-            self.slot_node[s] = -1
-            self.free.append(int(s))
-            self.data_slot[node] = -1
-            self.map_ok[node] = False
-            self.imap_ok[node] = False
+    def release(self, nodes):
+        """Free the data slots of these nodes (those without one are skipped)."""
+        nodes = np.atleast_1d(np.asarray(nodes, np.int64))
+        nodes = nodes[self.data_slot[nodes] >= 0]
+        s = self.data_slot[nodes]
+        self.slot_node[s] = -1
+        self.free.extend(int(v) for v in s)
+        self.data_slot[nodes] = -1
+        self.map_ok[nodes] = False
+        self.imap_ok[nodes] = False
 
     def leaves(self):
         n = self.n_nodes
@@ -271,8 +277,7 @@ class HierarchicalGrid:
     def _visit(self, nodes, strategy, iteration):
         missing = np.zeros(self.n_nodes, np.bool_)
         n = _visit_records(nodes, strategy, iteration, self.last_visit, self.data_slot, missing)
-        for nd in np.flatnonzero(missing):
-            self._new_slot(int(nd))
+        self._new_slots(np.flatnonzero(missing))
         return n
 
     def set_maps(self, slots, tabs, importance=False):
@@ -305,64 +310,68 @@ class HierarchicalGrid:
         """Release the slots of leaves that no camera vertex visited in the last `after` iterations."""
         n = self.n_nodes
         stale = np.flatnonzero((self.data_slot[:n] >= 0) & (self.last_visit[:n] <= iteration - after))
-        for nd in stale:
-            self.release(int(nd))
+        self.release(stale)
         return stale.size
 
     # --- splits -----------------------------------------------------------------------------
-    def _split(self, node, value):
-        self._grow_nodes(self.n_nodes + 2)
-        a = int(self.depth[node] % 3)
-        c = self.n_nodes
-        self.n_nodes += 2
-        self.child[node] = c
-        self.axis[node] = a
-        self.split[node] = value
+    def _split(self, nodes, values):
+        """Split the leaves `nodes` (distinct) at `values` on their depth's axis; returns their left
+        children (the right one of each follows it). A child inherits the parent's counts and
+        statistics halved, its visit, mixing weight and map; the left one takes the parent's data
+        slot, the right one a copy of it (both with the histogram halved); the parent keeps none."""
+        nodes = np.asarray(nodes, np.int64)
+        k = nodes.size
+        self._grow_nodes(self.n_nodes + 2 * k)
+        a = self.depth[nodes] % 3
+        c = self.n_nodes + 2 * np.arange(k, dtype=np.int64)
+        self.n_nodes += 2 * k
+        self.child[nodes] = c
+        self.axis[nodes] = a
+        self.split[nodes] = values
         for j in (c, c + 1):
             self.child[j] = -1
-            self.depth[j] = self.depth[node] + 1
-            self.box_lo[j] = self.box_lo[node]
-            self.box_hi[j] = self.box_hi[node]
-            self.node_count[j] = 0.5 * self.node_count[node]
-            self.last_visit[j] = self.last_visit[node]
-            self.alpha[j] = self.alpha[node]
-            self.mis_sum[j] = 0.5 * self.mis_sum[node]
-            self.mis_n[j] = 0.5 * self.mis_n[node]
-            self.out_sum[j] = 0.5 * self.out_sum[node]
-            self.out_n[j] = 0.5 * self.out_n[node]
-        self.box_hi[c, a] = value
-        self.box_lo[c + 1, a] = value
-        s = self.data_slot[node]
-        if s >= 0:  # children inherit the data halved and the map; the parent keeps nothing
-            self.power[s] *= 0.5
-            self.count[s] *= 0.5
-            self.pcount[s] *= 0.5
-            self.ipower[s] *= 0.5
-            self.data_slot[node] = -1
-            self.data_slot[c] = s
-            self.slot_node[s] = c
-            s2 = self._new_slot(c + 1)
-            for name in SLOT_ARRAYS:
-                getattr(self, name)[s2] = getattr(self, name)[s]
-            for ok in (self.map_ok, self.imap_ok):
-                ok[c] = ok[c + 1] = ok[node]
-                ok[node] = False
+            self.depth[j] = self.depth[nodes] + 1
+            self.box_lo[j] = self.box_lo[nodes]
+            self.box_hi[j] = self.box_hi[nodes]
+            self.last_visit[j] = self.last_visit[nodes]
+            self.alpha[j] = self.alpha[nodes]
+            for name in ("node_count", "mis_sum", "mis_n", "out_sum", "out_n"):
+                arr = getattr(self, name)
+                arr[j] = 0.5 * arr[nodes]
+        self.box_hi[c, a] = values
+        self.box_lo[c + 1, a] = values
+        has = self.data_slot[nodes] >= 0
+        par, left = nodes[has], c[has]
+        s = self.data_slot[par].astype(np.int64)
+        for name in ("power", "count", "pcount", "ipower"):
+            getattr(self, name)[s] *= 0.5
+        self.data_slot[par] = -1
+        self.data_slot[left] = s
+        self.slot_node[s] = left
+        s2 = self._new_slots(left + 1)
+        for name in SLOT_ARRAYS:
+            arr = getattr(self, name)
+            arr[s2] = arr[s]
+        for ok in (self.map_ok, self.imap_ok):
+            ok[left] = ok[left + 1] = ok[par]
+            ok[par] = False
         return c
 
     def split_mid(self, threshold, max_levels=3):
         """Split every leaf with a slot whose count exceeds threshold at its middle plane, again in
-        the children (counts halved) up to max_levels new levels. Returns the number of splits."""
+        the children (counts halved) up to max_levels new levels; a level at a time, every leaf
+        of it in one batch. Returns the number of splits."""
+        leaves = self.leaves()
+        todo = leaves[(self.data_slot[leaves] >= 0) & (self.node_count[leaves] > threshold)]
         n_split = 0
-        todo = [(int(nd), 0) for nd in self.leaves() if self.data_slot[nd] >= 0 and self.node_count[nd] > threshold]
-        while todo:
-            nd, lvl = todo.pop()
-            a = int(self.depth[nd] % 3)
-            c = self._split(nd, 0.5 * (self.box_lo[nd, a] + self.box_hi[nd, a]))
-            n_split += 1
-            if lvl + 1 < max_levels:
-                for j in (c, c + 1):
-                    if self.node_count[j] > threshold:
-                        todo.append((j, lvl + 1))
+        for _ in range(max_levels):
+            if todo.size == 0:
+                break
+            a = self.depth[todo] % 3
+            c = self._split(todo, 0.5 * (self.box_lo[todo, a] + self.box_hi[todo, a]))
+            n_split += todo.size
+            kids = np.concatenate([c, c + 1])
+            todo = kids[self.node_count[kids] > threshold]
         return n_split
 
     def split_median(self, points, threshold, max_levels=3, normals=None):
@@ -388,7 +397,7 @@ class HierarchicalGrid:
             if not (lo < v < hi) or right.all() or not right.any():
                 v = 0.5 * (lo + hi)
                 right = pts[:, a] >= v
-            c = self._split(nd, v)
+            c = int(self._split(np.array([nd]), np.array([v]))[0])
             n_split += 1
             self.node_count[c] = float((~right).sum())
             self.node_count[c + 1] = float(right.sum())
