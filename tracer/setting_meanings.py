@@ -87,6 +87,7 @@ GUIDES = {
         "candidates": "the samplers tried, names joined by + (from bsdf, grid, photon, ppg); the render goes on "
                       "with the one whose trial predicts the least relMSE x seconds",
         "trial_iterations": "training iterations of Algorithm 1 each guide runs before the choice (bsdf: 2^this spp)",
+        "trials_in_image": "1: the other candidates' trial films count in the image too (weighted by inverse variance)",
     },
     "ppg": {
         **_ALGORITHM1,

@@ -90,6 +90,9 @@ def solve_l2(base, gx, gy, alpha=0.2):
     return _inverse_l2(rhs, _eigenvalues(base.shape, a2))
 
 
+FILL_MAX = 10  # with fill, reweightings in all at most this x `reweights`
+
+
 def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=10, cg_rtol=1e-4, dtype=np.float32,
              deadline=None, fill=False, info=None):
     """The L1 screened Poisson reconstruction by IRLS (see the module docstring): `reweights`
@@ -99,8 +102,9 @@ def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=10,
     float64 of base's shape. The number of CG steps trades time for how far gradient outliers are suppressed
     (docs/gradient.md). deadline (time.perf_counter seconds): no reweighting starts that would
     end after it, at the pace of the one before (the first always runs). fill: with a deadline, the
-    time left after the `reweights` reweightings goes to more of them at the last eps (at most
-    `reweights` more), each bringing the image nearer the smoothed L1 minimum, so that a budgeted
+    time left after the `reweights` reweightings goes to more of them at the last eps (FILL_MAX x
+    `reweights` in all at most: a solve estimated 2x too long, on a busy machine, still ends by
+    its deadline, not short of it), each bringing the image nearer the smoothed L1 minimum, so that a budgeted
     render whose solve was estimated long still spends its budget. info (a dict): gets
     "reweights", the number run."""
     base, gx, gy = _check(base, gx, gy, alpha)
@@ -115,7 +119,7 @@ def solve_l1(base, gx, gy, alpha=0.2, reweights=20, eps0=0.05, cg_iterations=10,
     n_terms = base.size + gx[:, :-1].size + gy[:-1].size
     t_step = 0.0
     reweights = int(reweights)
-    steps = 2 * reweights if (fill and deadline is not None) else reweights
+    steps = FILL_MAX * reweights if (fill and deadline is not None) else reweights
     done = 0
     for k in range(steps):
         t0 = _time.perf_counter()

@@ -35,7 +35,7 @@ class AutoGuide(Guide):
 
     name = "auto"
     learns = True
-    DEFAULTS = {"candidates": "+".join(CANDIDATES), "trial_iterations": 2}
+    DEFAULTS = {"candidates": "+".join(CANDIDATES), "trial_iterations": 2, "trials_in_image": 0}
 
     def __init__(self, **settings):
         from . import make_guide
@@ -47,6 +47,7 @@ class AutoGuide(Guide):
             raise SettingsError(f"guide setting candidates must be distinct names from {', '.join(CANDIDATES)} "
                                 f"joined by +, got {s['candidates']!r}")
         self.trial_iterations = _int("trial_iterations", s["trial_iterations"], 1)
+        self.trials_in_image = bool(_int("trials_in_image", s["trials_in_image"], 0))
         self.settings = s
         self.cands = {n: make_guide(n) for n in names}
         self.guides = [g for g in self.cands.values() if g is not None]
@@ -191,7 +192,8 @@ class AutoGuide(Guide):
         self.why = (f"least predicted relMSE x seconds after {k} training iteration(s) of each guide ({others} "
                     f"of it)" + ("" if len(tried) == len(names) else
                                  f"; {', '.join(n for n in names if n not in tried)} not tried: half the budget was spent"))
-        session.discard([f for n in tried if n != self.choice for f in films[n]])
+        if not self.trials_in_image:
+            session.discard([f for n in tried if n != self.choice for f in films[n]])
         return self._go_on(session, algorithm1, entries[self.choice])
 
     def _go_on(self, session, algorithm1, last):
