@@ -49,7 +49,9 @@ def main(argv=None):
             errs.append(metrics.relmse(r.image, ref))
             print(f"{m} seed {seed}: relMSE {errs[-1]:.4g}, {r.stats['spp']} spp, training spp "
                   f"{[p['spp'] for p in train]}, updates {[round(p.get('time_update', 0.0), 2) for p in train]} s, "
-                  f"final passes {sum(p['time'] for p in passes if p not in train):.1f} s", flush=True)
+                  f"final passes {sum(p['time'] for p in passes if p not in train):.1f} s"
+                  + (f", chose {r.stats['guide_stats']['choice']}" if r.stats["guide_stats"].get("choice") else ""),
+                  flush=True)
         print(f"{m}: relMSE mean {np.mean(errs):.4g}, median {np.median(errs):.4g}", flush=True)
     return 0
 

@@ -371,6 +371,9 @@ def _run(argv, warnings):
           f"{s['msamples_per_s']:.2f} Msamples/s, {s['mrays_per_s']:.2f} Mrays/s; preview {png} "
           f"(exposure {s['preview_exposure']:+.2f} EV{', the reference' + chr(39) + 's' if ref is not None else ''}), stats {js}")
     training = s["guide_stats"].get("training") or {}
+    if s["guide_stats"].get("choice"):  # --guide auto: which sampler it rendered with, and why
+        guide_name = s["guide_stats"]["choice"]
+        print(f"  auto chose {guide_name}: {s['guide_stats']['why']}")
     if training.get("stopped"):
         print(f"  {guide_name} trained {training['trained']} of {training['iterations']} iterations after its pilot: "
               f"{training['why']}")

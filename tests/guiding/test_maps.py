@@ -141,8 +141,9 @@ def test_mid_plane_splits_pass_each_voxels_data_to_its_children():
     threshold T becomes 2^L leaves, L = min(max_levels, the least k with c / 2^k <= T), that tile
     its box, each with its histogram, counts and statistics divided by 2^L (halving is exact in
     binary floating point, so they are compared exactly) and its map flag; leaves at or below
-    T keep theirs. Detects a child that loses or doubles its parent's data, a wrong split count or
-    level, a child box outside its parent's, and a slot shared by two leaves."""
+    T keep theirs; freed slots are taken before new rows. Detects a child that loses or doubles its
+    parent's data, a wrong split count or level, a child box outside its parent's, a slot shared by
+    two leaves (a freed slot handed out twice), and freed slots left unused."""
     rng = np.random.default_rng(7)
     g = HierarchicalGrid(np.zeros(3), np.ones(3), 3, 4, 8)
     g.visit(g.locate(rng.random((4000, 3))), 0)
@@ -155,12 +156,18 @@ def test_mid_plane_splits_pass_each_voxels_data_to_its_children():
     g.node_count[leaves0] = counts
     g.out_sum[leaves0] = rng.random(leaves0.size)
     g.map_ok[leaves0] = rng.random(leaves0.size) < 0.5
+    freed = leaves0[counts == 3.0][:5]  # their slots go to the free list, for the splits to reuse
+    g.release(freed)
+    keep = ~np.isin(leaves0, freed)
+    leaves0, counts = leaves0[keep], counts[keep]
+    slots_before = g.n_slots
     before = {int(nd): (g.power[g.data_slot[nd]].copy(), g.count[g.data_slot[nd]].copy(), g.out_sum[nd],
                         bool(g.map_ok[nd]), g.box_lo[nd].copy(), g.box_hi[nd].copy()) for nd in leaves0}
     T, levels = 12.0, 3
     expect_levels = [0 if c <= T else min(levels, int(np.ceil(np.log2(c / T)))) for c in counts]
     n_split = g.split_mid(T, levels)
-    assert n_split == sum(2 ** L - 1 for L in expect_levels)
+    assert n_split == sum(2 ** L - 1 for L in expect_levels) and n_split > freed.size > 0
+    assert g.n_slots == slots_before + n_split - freed.size  # each split takes a slot, freed ones first
     parent = np.full(g.n_nodes, -1)
     inner = np.flatnonzero(g.child[: g.n_nodes] >= 0)
     parent[g.child[inner]] = inner

@@ -102,6 +102,10 @@ class FrozenGuide(Guide):
     spp_init = 1
 
     def __init__(self, guide):
+        if isinstance(guide, AutoGuide):  # the guide it chose
+            if guide.winner() is None:
+                raise SettingsError("FrozenGuide: auto rendered with bsdf (or has not rendered): no maps to freeze")
+            guide = guide.winner()
         if guide is None or getattr(guide, "grid", None) is None:
             raise SettingsError("FrozenGuide needs a guide that has learned (render with it first)")
         self.guide = guide

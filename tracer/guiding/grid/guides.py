@@ -250,7 +250,9 @@ class HistogramGuide(Guide):
             if self.mixing == "variance":
                 self._mixing.choose(self.grid.alpha)  # before the splits, which copy a voxel's weight to its children
             self._iterate_data()
-            self.grid.split_mid(self.c * math.sqrt(2.0 ** self.iteration), self.max_levels)
+            # c sqrt(2^t) after iteration t; a shortened last iteration's own spp (schedule._fit)
+            n = 2.0 ** self.iteration if self.train_spp is None else self.train_spp / self.spp_init
+            self.grid.split_mid(self.c * math.sqrt(n), self.max_levels)
         t1 = time.perf_counter()
         inf0 = self.time_inference
         self.time_learning += t1 - t0

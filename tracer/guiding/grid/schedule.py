@@ -19,15 +19,17 @@ a few spp where fireflies are rare, weighs them in too much (`veach-mis`, docs/f
 def algorithm1(session, guide, start=1, last=None):
     """Run Algorithm 1 for `guide` (a Guide with iterations, spp_init, train_budget) in `session`.
     guide.training says how training went (training_record); guide.train_spp is set to each
-    training pass's spp before it runs. start > 1: the pilot and iterations before `start` have
-    run already (guiding.auto's trials; guide.training holds them), `last` is the session's pass
-    entry of the latest."""
-    if start == 1:
+    training pass's spp before it runs. With `last` (the session's pass entry of the latest pass
+    the guide learned from: a pilot, or training iterations before `start`, as guiding.auto's
+    trials run them) the pilot is not run again and training starts at iteration `start`."""
+    if last is None:
         guide.training = training_record(guide.iterations)
         session.phase("pilot")
         guide.train_spp = 1
         session.run_pass(session.new_film("pilot"), 1, "pilot", learn=True)
         last = session.passes[-1]
+    elif guide.training is None:
+        guide.training = training_record(guide.iterations)
     for t in range(start, guide.iterations + 1):
         if guide.training_done():
             _stopped(guide, "converged", "the guide predicted that more training would not pay (mixing)")
@@ -95,10 +97,10 @@ def _fit(session, guide, t, n, last):
 
 def training_record(iterations):
     """What a render's stats say of Algorithm 1's training (stats guide_stats.training): the
-    iterations asked for, those trained after the pilot, their spp, and, where fewer were trained
-    or the last was shortened to fit the budget, `stopped` (converged, spp, train_budget or time)
-    and `why` in words; stopped is None after every iteration, or when the render was interrupted
-    during training."""
+    iterations asked for, those trained after the pilot, their spp, whether the last was
+    shortened to fit the budget, and, where fewer than asked were trained in full, `stopped`
+    (converged, spp, train_budget or time) and `why` in words; stopped is None after every
+    iteration, or when the render was interrupted during training."""
     return {"iterations": int(iterations), "trained": 0, "spp": [], "shortened": False, "stopped": None, "why": ""}
 
 
