@@ -18,11 +18,11 @@ def test_trial_cost_is_relative_variance_per_sample_times_seconds_per_spp():
     in each channel (so the 3 x 3 blur of the stand-in reference leaves it unbiased); both took 4
     spp, a at 1 s per spp and b at 0.25. relvar must be the mean over channels of s^2 / (m^2 +
     EPS) (b's four times it), z-tested with the spread of the per-pixel terms; cost relvar x
-    seconds per spp. Detects variance of the mean taken for the variance of a sample (4x too
-    small), a wrong sample-variance denominator (n for n - 1: 25%), a stand-in reference that holds
-    the films' outliers (film c is exactly m but 1000 m in a hundredth of the pixels: a mean over the
-    films instead of the median takes a's and b's relvar 9% low; the median of three, 0.4% high), and seconds per pass taken for
-    seconds per spp."""
+    seconds per spp. Detects variance of the mean taken for the variance of a sample (4x too small),
+    a wrong sample-variance denominator (n for n - 1: 25%), a stand-in reference that holds the
+    films' outliers (film c is exactly m but 1000 m in a hundredth of the pixels: a mean over the
+    films instead of the median takes a's and b's relvar 9% low; the median of three, 0.4% high),
+    and seconds per pass taken for seconds per spp."""
     rng = np.random.default_rng(5)
     w, h, spp = 64, 32, 4
     m = np.tile([0.1, 0.5, 1.5], (h * w, 1))
@@ -36,7 +36,8 @@ def test_trial_cost_is_relative_variance_per_sample_times_seconds_per_spp():
     c = films["c"] = Film(w, h)
     outlier = rng.random(h * w) < 0.01
     for _ in range(spp):
-        c.add(np.arange(h * w, dtype=np.int64), np.where(outlier[:, None], 1000.0 * m, m), np.zeros((h * w, c.aov.shape[1])))
+        c.add(np.arange(h * w, dtype=np.int64), np.where(outlier[:, None], 1000.0 * m, m),
+              np.zeros((h * w, c.aov.shape[1])))
     entries = {"a": {"spp": spp, "time": 4.0}, "b": {"spp": spp, "time": 1.0}, "c": {"spp": spp, "time": 1.0}}
     out = trial_costs(films, entries)
     for name, k, sec in (("a", 1.0, 1.0), ("b", 2.0, 0.25)):
@@ -63,11 +64,11 @@ def test_trial_iterations_are_at_most_the_candidates_iterations():
 def test_auto_renders_with_the_candidate_its_trials_predict_and_keeps_the_mean(in_image):
     """On the ajar box: a pilot, a trial per candidate (bsdf 4 spp, each guide its iterations of 2
     and 4 spp), then the winner's Algorithm 1 from iteration 3 (a guide) or final passes (bsdf).
-    The winner is the least predicted cost of the trials in the stats, the films the choice was
-    made from (each candidate's last trial) and the losers' other trial films get no weight (with
-    trials_in_image 1 the losers' do), and the image's mean agrees with a BSDF render's (z-test). Detects a winner other than the argmin, losers' films weighed in
-    (or left out with trials_in_image), a guide restarting Algorithm 1 from its pilot, and a
-    biased image."""
+    The winner is the least predicted cost of the trials in the stats, the films the choice was made
+    from (each candidate's last trial) and the losers' other trial films get no weight (with
+    trials_in_image 1 the losers' do), and the image's mean agrees with a BSDF render's (z-test).
+    Detects a winner other than the argmin, losers' films weighed in (or left out with
+    trials_in_image), a guide restarting Algorithm 1 from its pilot, and a biased image."""
     scene = scenes.builtin(ROOT, "ajar", 48, 36)
     g = make_guide("auto", trials_in_image=in_image)
     r = tracer.render(scene, spp=96, guide=g, seed=303 + in_image)

@@ -35,6 +35,11 @@ CANDIDATES = ("bsdf", "grid", "photon", "ppg")
 EPS = 0.01  # metrics.relmse's
 
 
+def _summed(name):
+    """A read-only property: the sum of attribute `name` over the candidate guides."""
+    return property(lambda self: sum(getattr(g, name) for g in self.guides))
+
+
 class AutoGuide(Guide):
     """The sampler that picks itself among `candidates` (names joined by "+") from a trial of each:
     the first training iterations of each guide, a short pass of BSDF sampling."""
@@ -78,47 +83,28 @@ class AutoGuide(Guide):
         for g in self.guides:
             g.learn_direct = value
 
+    # what the budget, memory and statistics count: every candidate's (all of them learned)
+    pixel_bytes = _summed("pixel_bytes")
+    fixed_bytes = _summed("fixed_bytes")
+    peak_memory = _summed("peak_memory")
+    time_learning = _summed("time_learning")
+    time_update = _summed("time_update")
+    time_inference = _summed("time_inference")
+
     @property
     def splits(self):
         """Whether the final passes may split paths: any candidate that might win may."""
         return any(g.splits for g in self.guides)
 
     @property
-    def pixel_bytes(self):
-        return sum(g.pixel_bytes for g in self.guides)
-
-    @property
-    def fixed_bytes(self):
-        return sum(g.fixed_bytes for g in self.guides)
-
-    @property
-    def peak_memory(self):
-        return sum(g.peak_memory for g in self.guides)
-
-    @property
-    def time_learning(self):
-        return sum(g.time_learning for g in self.guides)
-
-    @property
-    def time_update(self):
-        return sum(g.time_update for g in self.guides)
-
-    @property
-    def time_inference(self):
-        return sum(g.time_inference for g in self.guides)
-
-    @property
     def training(self):
         """The winner's Algorithm 1 record (None before a guide has won, or where bsdf won)."""
-        g = self._winner()
+        g = self.winner()
         return g.training if g is not None else None
-
-    def _winner(self):
-        return self.cands.get(self.choice) if self.choice is not None else None
 
     def winner(self):
         """The guide the last render chose (None: bsdf, or no render yet)."""
-        return self._winner()
+        return self.cands.get(self.choice) if self.choice is not None else None
 
     # --- the contract ------------------------------------------------------------------------------
     def prepare(self, scene, ctx):
@@ -134,9 +120,6 @@ class AutoGuide(Guide):
 
     def state(self):
         return self.active.state() if self.active is not None else empty_state()
-
-    def records_direct(self, ctx):
-        return self.learn_direct or not ctx.nee
 
     def observe(self, records):
         t0 = time.perf_counter()
@@ -157,7 +140,7 @@ class AutoGuide(Guide):
     def stats(self):
         out = {"name": self.name, "settings": dict(self.settings), "choice": self.choice, "why": self.why,
                "trials": self.trials}
-        g = self._winner()
+        g = self.winner()
         if g is not None:
             out["chosen"] = g.stats()
         return out
@@ -249,13 +232,14 @@ class AutoGuide(Guide):
         finally:
             ctx.path_loop = loop
         e = session.passes[-1]
-        return {"spp": e["spp"], "time": max(e["time"] - self._observed, 1e-9), "time_update": e.get("time_update", 0.0)}
+        return {"spp": e["spp"], "time": max(e["time"] - self._observed, 1e-9),
+                "time_update": e.get("time_update", 0.0)}
 
     def _go_on(self, session, algorithm1, last, start=1):
         """Render the rest with the chosen candidate: a guide its Algorithm 1 from iteration `start`
         after `last` (the session's entry of its latest training pass or of the shared pilot;
         None: all of it, pilot first), bsdf the final passes alone."""
-        g = self._winner()
+        g = self.winner()
         self.active, self._learners = g, [g] if g is not None else []
         if g is None:
             session.ctx.guide_state = empty_state()

@@ -65,11 +65,11 @@ def _fit(session, guide, t, n, last):
     whole iteration fits, else (n', True) with n' the spp that fit (0: training stops here).
 
     An iteration's cost is predicted from the guide's last pass (`last`, its session entry): its
-    seconds per spp plus its update's seconds per spp (an update's work, photons and records,
-    grows with the iteration's spp), times n. It fits while it ends within train_budget x the budget, and leaves the final passes
-    at least as long again. Where it does not fit, it runs shortened to the spp that do (so the
-    training share is used whatever the machine's timing draws), if that is at least
-    guide.min_last_spp(previous spp), else training ends."""
+    seconds per spp plus its update's seconds per spp (an update's work, photons and records, grows
+    with the iteration's spp), times n. It fits while it ends within train_budget x the budget and
+    leaves the final passes at least as long again. Where it does not fit, it runs shortened to the
+    spp that do (so the training share is used whatever the machine's timing draws), if that is at
+    least guide.min_last_spp(previous spp), else training ends."""
     per_spp = (last["time"] + last.get("time_update", 0.0)) / last["spp"]
     elapsed = session.elapsed()
     share = guide.train_budget * session.time
