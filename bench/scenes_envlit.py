@@ -2,6 +2,15 @@
 in variants that add one feature at a time, for bench.vs_mitsuba and tests/test_envlit.py.
 
     write(folder, variant, width=64, height=48, spp=32, max_depth=6) -> path of scene.xml
+    python -m bench.scenes_envlit room    # bench/results/scenes/envlit-room: `env` at 320 x 240, unbounded depth
+    python -m bench.scenes_envlit dining-room    # bench/results/scenes/dining-room-sky (classroom too)
+
+`envlit-room` is the guides' environment-lit interior (bench.schedule, bench.convergence with
+`--scene-dir bench/results/scenes`). `dining-room-sky` and `classroom-sky` are Bitterli's sun-lit
+scenes of ../shared/scenes-mitsuba with their `sunsky` emitter replaced by an envmap of the same
+sun direction and size (sky_image: a sky gradient and a sun disk, not Mitsuba's sunsky model),
+at 320 x 180; their meshes and textures are read from the shared folder. The references are in
+bench/results/references/<name>-mitsuba.
 
 The room is x in [-2, 2], y in [0, 2.5], z in [-8, 0], closed but for its openings: a window in the
 back wall (z = -8) that the camera sees straight through, two windows in the left wall (x = -2)
@@ -189,3 +198,94 @@ def write(folder, variant, width=64, height=48, spp=32, max_depth=6):
 def scene(variant, **kw):
     """write() into bench/results/scenes/envlit-<variant>; the path of its scene.xml."""
     return write(os.path.join(FOLDER, f"envlit-{variant}"), variant, **kw)
+
+
+SUN_RADIUS_DEG = 0.5358  # Mitsuba 0.6's sun: its angular radius, times sunRadiusScale
+SUN_TO_SKY = 5.0  # the sun's irradiance (at normal incidence) over the sky's on a horizontal plane
+SKY_W, SKY_H = 1024, 512
+
+
+def sky_image(sun_dir, sun_radius_deg, sky_scale=1.0):
+    """(SKY_H, SKY_W, 3) float32: a stand-in for a sunsky emitter, in the lat-long convention of
+    envmap_image: a blue sky brightening toward the horizon (radiance sky_scale / 6 at the zenith),
+    a dim ground, and a sun disk of the given angular radius toward sun_dir whose irradiance at
+    normal incidence is SUN_TO_SKY x the sky's on a horizontal plane. Not Mitsuba's sunsky model
+    (issue 59 builds that): a sky of the same layout, for the guides' tests."""
+    x = (np.arange(SKY_W) + 0.5) / SKY_W
+    v = np.arange(SKY_H) / (SKY_H - 1)
+    phi, theta = 2 * np.pi * x[None, :], np.pi * v[:, None]
+    d = np.stack(np.broadcast_arrays(np.sin(phi) * np.sin(theta), np.cos(theta) + 0 * phi,
+                                     -np.cos(phi) * np.sin(theta)), axis=-1)
+    up = d[..., 1]
+    zen = sky_scale / 6.0
+    sky = np.where(up >= 0.0, zen * (1.0 + 2.0 * (1.0 - up) ** 3), 0.3 * zen)[..., None]
+    img = sky * np.where(up[..., None] >= 0.0, np.array([0.55, 0.75, 1.2]), np.array([0.5, 0.45, 0.4]))
+    # the sky's irradiance on a horizontal plane, by the map's own quadrature (texel solid angles)
+    d_omega = (2 * np.pi / SKY_W) * (np.pi / (SKY_H - 1)) * np.sin(theta) * np.ones_like(phi)
+    e_sky = float((img.mean(axis=-1) * np.maximum(up, 0.0) * d_omega).sum())
+    s = np.asarray(sun_dir, float) / np.linalg.norm(sun_dir)
+    inside = d @ s >= np.cos(np.radians(sun_radius_deg))
+    omega = float((d_omega * inside).sum())
+    tint = np.array([1.0, 0.95, 0.85])
+    img[inside] = SUN_TO_SKY * e_sky / omega * tint / tint.mean()  # irradiance by the channels' mean
+    return img.astype(np.float32)
+
+
+def with_sky(src, dst, width=320, height=180):
+    """Write dst/scene.xml: the Mitsuba 0.6 scene src/scene.xml with its `sunsky` emitter replaced by
+    an `envmap` of sky_image() (its sunDirection, sunRadiusScale and skyScale), file names made
+    absolute (the meshes and textures stay in src), and the film set to width x height. The path
+    of the new scene.xml."""
+    import re
+    from tracer.imageio import write_image
+
+    text = open(os.path.join(src, "scene.xml")).read()
+    m = re.search(r'<emitter type="sunsky"\s*>(.*?)</emitter>', text, re.S)
+    if m is None:
+        raise ValueError(f"{src}/scene.xml: no sunsky emitter")
+    body = m.group(1)
+
+    def num(name, default):
+        f = re.search(rf'name="{name}"\s+value="([^"]+)"', body)
+        return float(f.group(1)) if f else default
+
+    v = re.search(r'name="sunDirection"\s+x="([^"]+)"\s+y="([^"]+)"\s+z="([^"]+)"', body)
+    sun = [float(v.group(i)) for i in (1, 2, 3)]
+    os.makedirs(dst, exist_ok=True)
+    write_image(os.path.join(dst, "sky.exr"), sky_image(sun, SUN_RADIUS_DEG * num("sunRadiusScale", 1.0),
+                                                        num("skyScale", 1.0)))
+    text = text[: m.start()] + '<emitter type="envmap"><string name="filename" value="sky.exr"/></emitter>' + \
+        text[m.end():]
+    src = os.path.abspath(src)
+    text = re.sub(r'(name="filename"\s+value=")(?!sky\.exr)([^"]+)"',
+                  lambda f: f'{f.group(1)}{os.path.join(src, f.group(2))}"', text)
+    text = re.sub(r'(name="width"\s+value=")\d+"', rf'\g<1>{width}"', text)
+    text = re.sub(r'(name="height"\s+value=")\d+"', rf'\g<1>{height}"', text)
+    path = os.path.join(dst, "scene.xml")
+    _write_text(path, text)
+    return path
+
+
+ROOM = dict(variant="env", width=320, height=240, max_depth=-1)  # the guides' environment-lit interior
+
+
+def main(argv=None):
+    import argparse
+
+    p = argparse.ArgumentParser(prog="python -m bench.scenes_envlit", description="write a generated scene")
+    p.add_argument("name", choices=("room", "classroom", "dining-room") + VARIANTS,
+                   help="room (envlit-room), a shared sun-lit scene with a sky map for its sunsky (<name>-sky), "
+                        "or a variant (envlit-<variant>)")
+    p.add_argument("--shared", default=os.path.join(os.path.dirname(ROOT), "shared", "scenes-mitsuba"))
+    a = p.parse_args(argv)
+    if a.name in ("classroom", "dining-room"):
+        print(with_sky(os.path.join(a.shared, a.name), os.path.join(FOLDER, f"{a.name}-sky")))
+    elif a.name == "room":
+        print(write(os.path.join(FOLDER, "envlit-room"), **ROOM))
+    else:
+        print(scene(a.name))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -39,7 +39,8 @@ _HISTOGRAM = {
     "mixing": "how the mixing weight is learned per voxel: variance (least second moment) or eq14",
     "split": "final passes split paths whose throughput exceeds this (0: off)",
     "window": "weight window: final passes split paths expected to bring more than this x their pixel (0: off)",
-    "window_low": "weight window: roulette paths expected to bring less than this x their pixel",
+    "window_low": "weight window: roulette paths expected to bring less than this x their pixel "
+                  "(auto: 0.2 without NEE, 0.05 with)",
 }
 
 GUIDES = {
@@ -99,7 +100,8 @@ GUIDES = {
         "empty": "a spatial leaf whose tree has no energy samples: bsdf (alone), or uniform (mixed, the reference's)",
         "split": "final passes split paths whose throughput exceeds this (0: off)",
         "window": "weight window: final passes split paths expected to bring more than this x their pixel (0: off)",
-        "window_low": "weight window: roulette paths expected to bring less than this x their pixel",
+        "window_low": "weight window: roulette paths expected to bring less than this x their pixel "
+                      "(auto: 0.2 without NEE, 0.05 with)",
         "rho": "a directional quadrant splits when it holds more than this share of its tree's energy",
         "max_depth": "directional quadtree levels, at most (20 at most)",
         "alpha": "learn_alpha=0: the probability of BSDF sampling everywhere",

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from ..errors import SettingsError
+from ..splitting import WeightWindow
 from .contract import empty_state
 
 
@@ -59,6 +60,14 @@ def _float(name, v, lo, hi=math.inf):
     if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not (lo <= v <= hi):
         raise SettingsError(f"guide setting {name} must be a number in [{lo}, {hi}], got {v!r}")
     return float(v)
+
+
+def window_settings(s):
+    """The splitting.WeightWindow of the settings dict s (`split`, `window`, `window_low`: a number or
+    "auto")."""
+    low = s["window_low"]
+    low = "auto" if isinstance(low, str) and low == "auto" else _float("window_low", low, 0.0)
+    return WeightWindow(_float("split", s["split"], 0.0), _float("window", s["window"], 0.0), low)
 
 
 class Guide:

@@ -16,8 +16,9 @@ everywhere (0.8: the paper's 0.5 makes fireflies here, docs/ppg.md).
 With NEE off, Russian roulette is the reference's (`roulette` auto, guiding.base): drawn after
 the sampled ray, once the emission it hits is counted, surviving with 0.99 once the trees exist;
 the path tracer's roulette starves the trees of the long paths that carry light (docs/ppg.md,
-"Faithful to the reference"). With NEE on it is the path tracer's. The final passes may split paths and play the weight window
-(`split`, `window`, `window_low`; tracer.splitting) with each leaf's outgoing radiance. The image
+"Faithful to the reference"). With NEE on it is the path tracer's. The final passes play the
+weight window (`window` 3, `window_low` auto; tracer.splitting) with each leaf's outgoing radiance,
+and may split by throughput (`split`). The image
 weighs every iteration in by inverse variance (`image` all) or is the final passes alone (`image`
 final, as the reference keeps its last iteration). With `direct` 0 (NEE on, the default) the
 records leave out the emission their direction hits (NEE samples it), PPG's "always" mode; with
@@ -30,8 +31,8 @@ import numpy as np
 
 from ..errors import SettingsError
 from ..film import Film
-from ..splitting import WeightWindow, observe_outgoing, outgoing
-from .base import Guide, _float, _int
+from ..splitting import observe_outgoing, outgoing
+from .base import Guide, _float, _int, window_settings
 from .contract import QUADTREE, empty_state
 from .mixing import VarianceMixing
 from .sdtree import SDTree
@@ -49,7 +50,7 @@ class PPGGuide(Guide):
                 "max_depth": 20, "alpha": 0.8, "direct": 0, "learn_alpha": 1, "alpha_min": 0.2, "alpha_max": 0.8,
                 "mis_min_samples": 32, "switch_off": 1.0, "spatial_filter": "nearest", "directional_filter": "nearest",
                 "roulette": "auto", "records": "unbiased", "split_spp": 2, "image": "all", "empty": "uniform",
-                "split": 0.0, "window": 0.0, "window_low": 0.05}
+                "split": 0.0, "window": 3.0, "window_low": "auto"}
     FILTERS = {"spatial_filter": ("nearest", "stochastic"), "directional_filter": ("nearest", "box"),
                "image": ("all", "final"), "empty": ("bsdf", "uniform")}
     fixed_bytes = 64 << 20
@@ -84,8 +85,7 @@ class PPGGuide(Guide):
             if s[key] not in allowed:
                 raise SettingsError(f"guide setting {key} must be one of {', '.join(allowed)}, got {s[key]!r}")
         self.split_spp = _float("split_spp", s["split_spp"], 1.0)
-        self.splitting = WeightWindow(_float("split", s["split"], 0.0), _float("window", s["window"], 0.0),
-                                      _float("window_low", s["window_low"], 0.0))
+        self.splitting = window_settings(s)
         self.roulette_settings(s)
         self.settings = s
         self.grid = None
@@ -99,7 +99,8 @@ class PPGGuide(Guide):
         self._state = empty_state()
         self.time_learning = self.time_update = 0.0
         self.peak_memory = 0
-        self.info = {"vertices": 0, "switched_off": False, "roulette": self.resolve_roulette(ctx), "records": []}
+        self.info = {"vertices": 0, "switched_off": False, "roulette": self.resolve_roulette(ctx), "records": [],
+                     "window_low": self.splitting.resolve(ctx.nee)}
         self._alpha = np.full(1, self.alpha)  # per SD-tree node
         self._out = _Outgoing()  # per SD-tree node, the weight window's outgoing radiance
         self._mixing = (VarianceMixing(self.alpha_min, self.alpha_max, self.q_thr, self.switch_off,

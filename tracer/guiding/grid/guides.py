@@ -67,8 +67,8 @@ from numba import prange
 from ..._jit import jit, kernel
 from ...errors import SettingsError
 from ...film import Film
-from ...splitting import WeightWindow, observe_outgoing, outgoing
-from ..base import Guide, _float, _int
+from ...splitting import observe_outgoing, outgoing
+from ..base import Guide, _float, _int, window_settings
 from ..directional import build_tables
 from .photons import env_aim, trace_photons
 from .reconstruct import RECONSTRUCTORS, Gaussian, make_reconstructor
@@ -166,8 +166,7 @@ class HistogramGuide(Guide):
         self.q_thr = _float("mis_min_samples", s["mis_min_samples"], 1.0)
         self.max_levels = _int("max_levels", s["max_levels"], 0)
         self.train_budget = _float("train_budget", s["train_budget"], 0.0, 1.0)
-        self.splitting = WeightWindow(_float("split", s["split"], 0.0), _float("window", s["window"], 0.0),
-                                      _float("window_low", s["window_low"], 0.0))
+        self.splitting = window_settings(s)
         self.learn_direct = bool(_int("direct", s["direct"], 0))
         if s["direct"] not in (0, 1):
             raise SettingsError(f"guide setting direct must be 0 or 1, got {s['direct']!r}")
@@ -215,7 +214,7 @@ class HistogramGuide(Guide):
         self.reconstructor.maps_inferred = 0
         self.peak_memory = 0
         self.info = {"photons": 0, "deposits": 0, "photon_rays": 0, "vertices": 0, "switched_off": False,
-                     "roulette": self.resolve_roulette(ctx)}
+                     "roulette": self.resolve_roulette(ctx), "window_low": self.splitting.resolve(ctx.nee)}
         self._mixing = VarianceMixing(self.alpha_min, self.alpha_max, self.q_thr, self.switch_off,
                                       self.records_direct(ctx))
 
@@ -423,7 +422,7 @@ class PhotonGuide(HistogramGuide):
     # why each default: docs/guiding.md, "Defaults and where they were measured"
     # aim_env: environment photons start only where camera paths escaped (photons.EnvAim)
     DEFAULTS = dict(COMMON, split_c=4000.0, sigma=1.0, photons_per_pixel=2.0, light_guiding=0.0, split=2.0, window=3.0,
-                    window_low=0.05, aim_env=1, reference_photons=0.0, reference_sigma=0.0)
+                    window_low="auto", aim_env=1, reference_photons=0.0, reference_sigma=0.0)
     REFERENCE_ITERATION = 1 << 20  # the photon keys' iteration of the reference maps (distinct from training)
     ESCAPES_PER_WAVE = 16384  # camera records a wave tests for escapes, at most
     ESCAPES_MAX = 200000  # escaped rays kept
