@@ -54,6 +54,22 @@ def _box_run_at_one_time_budget(tmp_path, monkeypatch):
     return out, ref_dir
 
 
+def test_a_run_on_other_scenes_keeps_the_stored_records(tmp_path, monkeypatch):
+    """A sweep given other --scenes than the records in --out already hold adds to them: the
+    records of the scenes it was not given stay in records.jsonl (they were once dropped when
+    the summary, which covers the given scenes only, was written)."""
+    out, _ = _box_run_at_one_time_budget(tmp_path, monkeypatch)
+    box = scenes.closed_box(tmp_path / "other", 0.5, 1.0, width=8, height=8)
+    other = os.path.join(os.path.dirname(box), "other.obj")  # the same box under another name
+    os.rename(box, other)
+    assert convergence.main(["--scenes", other, "--time", "0.05", "--seeds", "1", "--out", str(out),
+                             "--workers", "0"]) == 0
+    recs = [json.loads(line) for line in open(out / "records.jsonl")]
+    by_scene = {s: sum(r["scene"] == s for r in recs) for s in {r["scene"] for r in recs}}
+    assert by_scene == {"box": 2, "other": 1}
+    assert "## other" in (out / "summary.md").read_text()
+
+
 def test_default_spp_budgets_do_not_rerun_bsdf(tmp_path, monkeypatch):
     """Without --spp the spp budgets are bsdf's own spp at each time budget: bsdf is not rendered
     again at them, its time runs are its points on the spp chart."""
