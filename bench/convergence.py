@@ -74,7 +74,7 @@ CHART_METRICS = ("relMSE", "1-SSIM")  # where denoisers and learned reconstructi
 GUIDE_STATS = ("m", "layers", "width", "parameters", "val_nll", "epochs", "fallback", "zero_share_uniform",
                "zero_share_final", "second_moment_ratio", "inference_us_per_sample", "candidates_lit",
                "pixels_guided", "pixels", "window", "centre_sparsity", "initial_lit", "lit_share", "switched_off",
-               "voxels", "training")
+               "voxels", "training", "choice", "why")
 
 
 def run_one(scene, method, seed, ref, time_budget=None, spp=None, images=None, threads=None):
