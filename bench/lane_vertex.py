@@ -242,7 +242,8 @@ VARIANTS = {  # name: (blocked, fastmath, polynomial sincos)
 
 
 def capture(name, spp, width, height):
-    """Render `name` on the wavefront and return (scene context arrays, [args of every shade call])."""
+    """Render `name` on the wavefront (max depth 8, rr depth 5) and return the arguments of every
+    call of path.shade, each array copied as it was before the call."""
     over = {k: v for k, v in (("width", width), ("height", height)) if v}
     scene = tracer.load_scene(throughput.scene_spec(name)["obj"], **over)
     kw = dict(max_depth=8, rr_depth=5, path_loop="wave")
