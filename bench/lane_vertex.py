@@ -48,15 +48,16 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "bench", "results", "lane_vertex.json")
 
 
-def _has_avx512():
+def _cpuinfo():
+    """The text of /proc/cpuinfo ("" where there is none)."""
     try:
         with open("/proc/cpuinfo") as f:
-            return "avx512f" in f.read()
+            return f.read()
     except OSError:
-        return False
+        return ""
 
 
-LANES = 16 if _has_avx512() else 8
+LANES = 16 if "avx512f" in _cpuinfo() else 8
 FLAGS = {"arcp", "contract", "nsz"}
 
 # float32 constants: a Python float literal is float64 in Numba and would widen the arithmetic
@@ -508,14 +509,8 @@ def main(argv=None):
 
 
 def _cpu_name():
-    try:
-        with open("/proc/cpuinfo") as f:
-            for ln in f:
-                if ln.startswith("model name"):
-                    return ln.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return ""
+    m = re.search(r"^model name\s*:\s*(.*)$", _cpuinfo(), re.M)
+    return m.group(1).strip() if m else ""
 
 
 if __name__ == "__main__":

@@ -24,6 +24,13 @@ _MIXING = {
 }
 
 # the histogram guides on a hierarchical grid (guiding.grid.guides): grid, photon
+_WINDOW = {  # the splitting and weight-window settings of every guide that plays them (tracer.splitting)
+    "split": "final passes split paths whose throughput exceeds this (0: off)",
+    "window": "weight window: final passes split paths expected to bring more than this x their pixel (0: off)",
+    "window_low": "weight window: roulette paths expected to bring less than this x their pixel "
+                  "(auto: 0.2 without NEE, 0.05 with)",
+}
+
 _HISTOGRAM = {
     **_ALGORITHM1,
     **_MIXING,
@@ -37,10 +44,7 @@ _HISTOGRAM = {
     "sigma": "width of the Gaussian filter in bins",
     "cnn_max_photons": "reconstruct=cnn: maps of at least this many photons take the Gaussian instead",
     "mixing": "how the mixing weight is learned per voxel: variance (least second moment) or eq14",
-    "split": "final passes split paths whose throughput exceeds this (0: off)",
-    "window": "weight window: final passes split paths expected to bring more than this x their pixel (0: off)",
-    "window_low": "weight window: roulette paths expected to bring less than this x their pixel "
-                  "(auto: 0.2 without NEE, 0.05 with)",
+    **_WINDOW,
 }
 
 GUIDES = {
@@ -98,10 +102,7 @@ GUIDES = {
         "image": "all: the image weighs every training iteration and the final passes by inverse variance; "
                  "final: the final passes alone (the reference keeps its last iteration)",
         "empty": "a spatial leaf whose tree has no energy samples: bsdf (alone), or uniform (mixed, the reference's)",
-        "split": "final passes split paths whose throughput exceeds this (0: off)",
-        "window": "weight window: final passes split paths expected to bring more than this x their pixel (0: off)",
-        "window_low": "weight window: roulette paths expected to bring less than this x their pixel "
-                      "(auto: 0.2 without NEE, 0.05 with)",
+        **_WINDOW,
         "rho": "a directional quadrant splits when it holds more than this share of its tree's energy",
         "max_depth": "directional quadtree levels, at most (20 at most)",
         "alpha": "learn_alpha=0: the probability of BSDF sampling everywhere",
