@@ -17,7 +17,7 @@ $(BIN)/python:
 $(VENV)/.installed: $(BIN)/python pyproject.toml
 	$(BIN)/pip install --quiet --retries 1 --timeout 30 --index-url $(TORCH_INDEX) torch==2.13.0 || \
 		$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e ".[test,bench,learn,mitsuba,denoise]"
+	$(BIN)/pip install --quiet -e ".[test,bench,learn,mitsuba,denoise,dask]"
 	touch $@
 
 setup: $(VENV)/.installed

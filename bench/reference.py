@@ -44,6 +44,7 @@ import time
 import numpy as np
 
 import tracer
+from tracer.distributed import agreement, bias_z, merge  # noqa: F401 (bias_z: tests read it here)
 from tracer.imageio import tonemap
 from tracer.provenance import git_commit
 from tracer.testing import z_critical
@@ -77,34 +78,9 @@ def load(out):
     return data[:, :, :3], data[:, :, 3:6], meta
 
 
-def merge(m1, v1, n1, m2, v2, n2):
-    """Combine two independent estimates weighted by spp: mean and variance of the mean."""
-    w1, w2 = n1 / (n1 + n2), n2 / (n1 + n2)
-    return w1 * m1 + w2 * m2, w1 * w1 * v1 + w2 * w2 * v2
-
-
-def bias_z(image, variance, ref, ref_var):
-    """Per channel: mean over pixels of (I - R) divided by its standard error, from the per-pixel
-    variances of I's and R's means (summed over pixels first, so that a pixel's noisy variance
-    estimate does not bias the score)."""
-    d = (image.astype(np.float64) - ref).reshape(-1, 3)
-    v = (variance.astype(np.float64) + ref_var).reshape(-1, 3)
-    n = d.shape[0]
-    se = np.sqrt(v.sum(axis=0)) / n
-    return np.where(se > 0, d.mean(axis=0) / np.where(se > 0, se, 1.0), 0.0)
-
-
 def z_threshold(tests, alpha=0.01):
     """|z| threshold of a two-sided test at family-wise level alpha over `tests` tests (Sidak)."""
     return z_critical(tests, alpha)
-
-
-def agreement(mean, var, ref, ref_var, alpha=0.01):
-    """(agrees, z per channel, threshold): does an independent estimate (mean, var) agree with the
-    stored one (ref, ref_var)? bias_z per channel against z_threshold(3, alpha)."""
-    z = bias_z(mean, var, ref, ref_var)
-    zc = z_threshold(3, alpha)
-    return bool(np.all(np.abs(z) < zc)), z, zc
 
 
 def segments_of(meta):

@@ -4,9 +4,11 @@
         --width 320 --height 180 --spp 64 --seeds 4 --out bench/summary/mitsuba_scenes/table.md
     python -m bench.vs_mitsuba path/to/scene.xml --spp 256
     python -m bench.vs_mitsuba envlit --width 64 --height 48 --spp 32 --seeds 4   # or envlit-mask, ...
+    python -m bench.vs_mitsuba delta --width 64 --height 48 --spp 64 --seeds 4    # or delta-spot, ...
 
 A scene argument that is not a file names a generated scene: `envlit` (every variant of
-bench.scenes_envlit, the environment-lit interior, one feature added at a time) or `envlit-<variant>`.
+bench.scenes_envlit, the environment-lit interior, one feature added at a time) or `envlit-<variant>`;
+`delta` (bench.scenes_delta: a room lit by a point, a spot or a directional light) or `delta-<kind>`.
 
 Mitsuba 3 renders a copy of each file that it can load (`mitsuba_copy`: what it rejects is dropped
 or mapped the way the tracer reads it, e.g. 0.6's `extEta` folded into eta and k, `gamma` on a
@@ -28,7 +30,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 import tracer
-from bench import scenes_envlit
+from bench import scenes_delta, scenes_envlit
 from bench.atomic import write_text
 from tracer.metals import METALS
 from tracer.textures import srgb_decode
@@ -177,8 +179,13 @@ def scene_paths(name):
         return [scenes_envlit.scene(v) for v in scenes_envlit.VARIANTS]
     if name.startswith("envlit-") and name[len("envlit-"):] in scenes_envlit.VARIANTS:
         return [scenes_envlit.scene(name[len("envlit-"):])]
+    if name == "delta":
+        return [scenes_delta.scene(k) for k in scenes_delta.KINDS]
+    if name.startswith("delta-") and name[len("delta-"):] in scenes_delta.KINDS:
+        return [scenes_delta.scene(name[len("delta-"):])]
     raise SystemExit(f"bench.vs_mitsuba: {name}: no such file, nor a generated scene (envlit, "
-                     f"{', '.join('envlit-' + v for v in scenes_envlit.VARIANTS)})")
+                     f"{', '.join('envlit-' + v for v in scenes_envlit.VARIANTS)}, delta, "
+                     f"{', '.join('delta-' + k for k in scenes_delta.KINDS)})")
 
 
 def main(argv=None):

@@ -171,23 +171,23 @@ def test_undefined_material_without_light_names_the_cause(tmp_path, capsys):
 
 
 def test_warnings_print_before_the_failure_they_explain(tmp_path, capsys):
-    """A Mitsuba scene lit by a `point` emitter alone: the warning that the emitter is not supported
+    """A Mitsuba scene lit by a `sunsky` emitter alone: the warning that the emitter is not supported
     comes on stderr before the error line "the scene has no light", which is the last line, and the
     run exits with 2. Detects held warnings dropped (or printed after the error) when a run fails."""
-    xml = tmp_path / "point.xml"
+    xml = tmp_path / "sky.xml"
     xml.write_text("""<scene version="3.0.0">
         <sensor type="perspective"><transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
         </transform><film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
         </sensor>
         <shape type="rectangle"/>
-        <emitter type="point"><point name="position" x="0" y="0" z="2"/><rgb name="intensity" value="5"/></emitter>
+        <emitter type="sunsky"><float name="turbidity" value="3"/></emitter>
     </scene>""")
     code, out, err = run_cli(capsys, xml, "-o", tmp_path / "o.exr")
     lines = [line for line in err.splitlines() if line.strip()]
     assert code == 2, (code, err)
     assert len(lines) == 2 and "Traceback" not in err, lines
-    assert lines[0].startswith("tracer: warning: ") and "'point' is not supported" in lines[0]
-    assert lines[1].startswith("tracer: ") and "point.xml" in lines[1] and "no light" in lines[1]
+    assert lines[0].startswith("tracer: warning: ") and "'sunsky' is not supported" in lines[0]
+    assert lines[1].startswith("tracer: ") and "sky.xml" in lines[1] and "no light" in lines[1]
 
 
 @pytest.mark.parametrize("line,what", [("v 1 2\n", "malformed vertex"), ("v 1 nan 2\n", "not finite"),

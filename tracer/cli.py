@@ -71,6 +71,14 @@ def _parser():
     p.add_argument("--crop", help="render only the window x0,y0,w,h of the image")
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--wave-size", type=int, default=None, help="paths per wave (memory vs overhead)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="split the render over N Dask worker processes on this machine (seeds seed..seed+N-1, "
+                        "merged); needs the dask extra")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="split the render over the workers of this Dask scheduler (one segment each)")
+    p.add_argument("--segments-dir", default=None, metavar="DIR",
+                   help="with --workers or --scheduler: keep finished segments here, so that a run started again "
+                        "renders only the missing ones (default: <output>.segments)")
     p.add_argument("-o", "--output", help="output EXR (default: <scene name>.exr in the current folder, a "
                                           "scene.xml taking its folder's name; a missing folder is created)")
     p.add_argument("--reference", help="reference EXR: print relMSE, MSE and 1-SSIM against it")
@@ -329,6 +337,16 @@ def _run(argv, warnings):
         from .denoise import require
 
         require(args.denoise)
+    dask = args.workers is not None or args.scheduler is not None
+    if dask:
+        from .distributed import check_ready
+
+        check_ready(args.workers)
+        if integ.name != "path":
+            raise TracerError(f"--integrator {integ.name} is not split over Dask workers (its reconstruction needs "
+                              f"every sample in one place): render it without --workers or --scheduler")
+    elif args.segments_dir is not None:
+        raise TracerError("--segments-dir goes with --workers or --scheduler")
     out_dir = _check_output(out, args.variance, integ.outputs + (("denoised",) if args.denoise else ()))
     ref = _read_reference(args.reference) if args.reference else None
     notice = [not args.quiet]  # once: before framing a scene without a camera, or before the render
@@ -362,7 +380,8 @@ def _run(argv, warnings):
                     rr_depth=args.rr_depth, seed=args.seed, accel=args.accel, threads=args.threads,
                     pixel_filter=args.filter, crop=crop,
                     wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet, integrator=integ,
-                    denoise=args.denoise or False)
+                    denoise=args.denoise or False, scheduler=args.scheduler, workers=args.workers,
+                    segments_dir=(args.segments_dir or os.path.splitext(out)[0] + ".segments") if dask else None)
     if ref is not None:
         result.stats["metrics"] = metrics.all_metrics(result.image, ref)
     exr, png, js = write_outputs(result, out, exposure=args.exposure, variance=args.variance, reference=ref)
@@ -377,6 +396,12 @@ def _run(argv, warnings):
     if training.get("stopped"):
         print(f"  {guide_name} trained {training['trained']} of {training['iterations']} iterations after its pilot: "
               f"{training['why']}")
+    if s.get("segments"):
+        seeds = [g["seed"] for g in s["segments"]]
+        print(f"  {len(seeds)} segments (seeds {seeds[0]}..{seeds[-1]}) on {s['scheduler']}, merged in seed order")
+        kept = os.path.splitext(out)[0] + ".segments" if args.segments_dir is None else args.segments_dir
+        if s["interrupted"] and os.path.isdir(kept):
+            print(f"  finished segments kept in {kept}: the same command renders only the others")
     if result.denoised is not None:
         base = os.path.splitext(exr)[0]
         print(f"  denoised (Open Image Denoise, {s['time_denoise']:.2f} s): {base}.denoised.exr, preview "

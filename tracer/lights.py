@@ -12,8 +12,14 @@ interpolated bilinearly between texel centres (columns periodic, rows from pole 
 directions are sampled over the (H - 1) x W cells between those centres, each cell in proportion
 to the mean luminance of its four corners x sin(theta) at its middle, uniformly in (u, v) within it.
 
+Delta lights (tracer.scene.DeltaLight: point, spot, directional) join the triangles in the same
+power-proportional choice, after them: entry li >= L of `func`/`cdf` is delta light li - L. They are
+reached by next-event estimation alone; their "pdf" is the probability of choosing them, and
+sample_light says which kind of light a sample came from by its last value (<= -2,
+delta_light_of) so that callers give it MIS weight 1.
+
 Emission is one-sided: a triangle emits from the side of its counter-clockwise normal.
-All pdfs returned here are per unit solid angle at the receiving point.
+All pdfs returned here are per unit solid angle at the receiving point, but for delta lights.
 
 The kernels take the `Lights` tuple whole; its functions are inlined at the Numba level
 (`inline="always"`), because a call that is not inlined copies the tuple of arrays by value
@@ -41,6 +47,15 @@ ENV_CONSTANT = 1
 ENV_MAP = 2
 ENV_BILINEAR = 3
 
+DELTA_POINT = 1
+DELTA_SPOT = 2
+DELTA_DIRECTIONAL = 3
+DELTA_KINDS = {"point": DELTA_POINT, "spot": DELTA_SPOT, "directional": DELTA_DIRECTIONAL}
+
+# sample_light's last value when the light is not a triangle: LIGHT_ENV for the environment,
+# LIGHT_ENV - 1 - j (<= -2) for delta light j (delta_light_of)
+LIGHT_ENV = -1
+
 
 class Lights(NamedTuple):
     """Arrays the kernels read. L emissive triangles, F triangles in all."""
@@ -61,6 +76,11 @@ class Lights(NamedTuple):
     env_cond_cdf: np.ndarray
     env_marg_func: np.ndarray
     env_marg_cdf: np.ndarray
+    delta_kind: np.ndarray  # (K,) int64 DELTA_POINT, DELTA_SPOT, DELTA_DIRECTIONAL
+    delta_pos: np.ndarray  # (K, 3) position (point, spot)
+    delta_dir: np.ndarray  # (K, 3) unit: the spot's axis, the directional light's direction of travel
+    delta_value: np.ndarray  # (K, 3) intensity (point, spot) or irradiance (directional)
+    delta_cone: np.ndarray  # (K, 4) spot: cos(cutoff), cutoff, cos(beam), 1 / (cutoff - beam) (radians)
 
 
 def luminance(rgb):
@@ -111,12 +131,16 @@ def build_lights(scene):
         env_type, env_const = ENV_CONSTANT, env.radiance.astype(np.float64)
         env_power = math.pi * radius * radius * math.pi * float(luminance(env_const))
 
-    if emissive.size == 0:
+    delta = delta_tables(scene.delta_lights)
+    d_power = delta_power(delta, radius)
+    fin_power = np.concatenate([power, d_power])
+    if fin_power.size == 0:
         func, cdf = np.ones(1), np.array([0.0, 1.0])
         p_env = 1.0
     else:
-        func, cdf = build_distribution_1d(power if tri_power > 0 else np.ones_like(power))
-        p_env = env_power / (env_power + tri_power) if env_type != ENV_NONE else 0.0
+        total = float(fin_power.sum())
+        func, cdf = build_distribution_1d(fin_power if total > 0 else np.ones_like(fin_power))
+        p_env = env_power / (env_power + total) if env_type != ENV_NONE else 0.0
         if env_type != ENV_NONE:
             p_env = min(max(p_env, 0.05), 0.95)  # neither strategy is ever starved
     return Lights(
@@ -133,7 +157,79 @@ def build_lights(scene):
         env_map,
         env_rot,
         *tables,
+        *delta,
     )
+
+
+def delta_tables(delta_lights):
+    """(kind, pos, dir, value, cone) arrays of Lights for a list of tracer.scene.DeltaLight."""
+    k = len(delta_lights)
+    kind = np.array([DELTA_KINDS[d.kind] for d in delta_lights], dtype=np.int64)
+    pos = np.array([d.position for d in delta_lights], dtype=np.float64).reshape(k, 3)
+    axis = np.array([d.direction for d in delta_lights], dtype=np.float64).reshape(k, 3)
+    axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-300)
+    value = np.array([d.intensity for d in delta_lights], dtype=np.float64).reshape(k, 3)
+    cone = np.zeros((k, 4))
+    for i, d in enumerate(delta_lights):
+        width = d.cutoff - d.beam
+        cone[i] = math.cos(d.cutoff), d.cutoff, math.cos(d.beam), 1.0 / width if width > 0 else 1e300
+    return kind, pos, axis, value, cone
+
+
+def delta_power(delta, radius):
+    """(K,) luminance power of each delta light: 4 pi I a point, I times the spot's falloff integrated
+    over the sphere (2 pi (1 - (sin c - sin b) / (c - b)) for cutoff c, beam b), E pi R^2 a
+    directional light through the scene's bounding sphere of radius R."""
+    kind, _, _, value, cone = delta
+    lum = luminance(value)
+    out = np.zeros(kind.shape[0])
+    for i in range(kind.shape[0]):
+        if kind[i] == DELTA_POINT:
+            out[i] = 4.0 * math.pi * lum[i]
+        elif kind[i] == DELTA_SPOT:
+            c, b = cone[i, 1], math.acos(min(max(cone[i, 2], -1.0), 1.0))
+            solid = 1.0 - math.cos(c) if c - b <= 1e-9 else 1.0 - (math.sin(c) - math.sin(b)) / (c - b)
+            out[i] = 2.0 * math.pi * solid * lum[i]
+        else:
+            out[i] = math.pi * radius * radius * lum[i]
+    return out
+
+
+@jit(inline="always")
+def spot_falloff(lt, j, d):
+    """Spot light j's falloff (Mitsuba 3's, linear in angle) toward the unit world direction d it
+    shines along: 1 within the beam, 0 past the cutoff."""
+    c = d[0] * lt.delta_dir[j, 0] + d[1] * lt.delta_dir[j, 1] + d[2] * lt.delta_dir[j, 2]
+    if not c > lt.delta_cone[j, 0]:
+        return 0.0
+    if c >= lt.delta_cone[j, 2]:
+        return 1.0
+    return (lt.delta_cone[j, 1] - math.acos(min(c, 1.0))) * lt.delta_cone[j, 3]
+
+
+@jit(inline="always")
+def delta_light_of(t):
+    """The delta light a sample_light result t <= -2 came from (-1 for any other light)."""
+    return LIGHT_ENV - 1 - t if t < LIGHT_ENV else -1
+
+
+@jit(inline="always")
+def delta_arrival(lt, j, y):
+    """(unit world direction from y toward delta light j, distance (inf: directional), value arriving
+    at y (RGB): I falloff / d^2 or E)."""
+    if lt.delta_kind[j] == DELTA_DIRECTIONAL:
+        return ((-lt.delta_dir[j, 0], -lt.delta_dir[j, 1], -lt.delta_dir[j, 2]), np.inf,
+                (lt.delta_value[j, 0], lt.delta_value[j, 1], lt.delta_value[j, 2]))
+    dx, dy, dz = lt.delta_pos[j, 0] - y[0], lt.delta_pos[j, 1] - y[1], lt.delta_pos[j, 2] - y[2]
+    d2 = dx * dx + dy * dy + dz * dz
+    if not d2 > 0.0:
+        return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0)
+    dist = math.sqrt(d2)
+    wi = (dx / dist, dy / dist, dz / dist)
+    s = 1.0 / d2
+    if lt.delta_kind[j] == DELTA_SPOT:
+        s *= spot_falloff(lt, j, (-wi[0], -wi[1], -wi[2]))
+    return wi, dist, (lt.delta_value[j, 0] * s, lt.delta_value[j, 1] * s, lt.delta_value[j, 2] * s)
 
 
 def bilinear_cells(env_map):
@@ -267,7 +363,8 @@ def sample_light(lt, tri, x, u_sel, u0, u1):
     Returns (wi, dist, radiance rgb, pdf, t): wi the unit world direction from x, dist the
     distance to the point (np.inf for the environment), pdf per unit solid angle including
     the choice of light (0 when the sample carries no light: back side, degenerate), t the
-    index of the triangle the point lies on (-1 for the environment).
+    index of the triangle the point lies on (LIGHT_ENV for the environment). Delta light j gives
+    t = -2 - j, the value arriving at x (delta_arrival) and pdf the probability of choosing it.
     """
     if u_sel < lt.p_env:
         # The environment
@@ -287,6 +384,10 @@ def sample_light(lt, tri, x, u_sel, u0, u1):
     # A triangle, by power, then a point by area
     u = (u_sel - lt.p_env) / (1.0 - lt.p_env)
     _, _, li = sample_distribution_1d(lt.func, lt.cdf, min(u, 1.0 - 1e-12))
+    if li >= lt.tri.shape[0]:
+        j = li - lt.tri.shape[0]
+        wi, dist, val = delta_arrival(lt, j, x)
+        return wi, dist, val, (1.0 - lt.p_env) * (lt.cdf[li + 1] - lt.cdf[li]), LIGHT_ENV - 1 - j
     t = lt.tri[li]
     b1, b2 = sample_uniform_triangle(u0, u1)
     b0 = 1.0 - b1 - b2

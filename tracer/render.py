@@ -67,7 +67,7 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
            accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
            guide_settings=None, pixel_filter="box", crop=None, integrator="path", integrator_settings=None,
            shift=None, recon=None, recon_alpha=None, shift_roughness=None, recon_settings=None, path_loop="thread",
-           denoise=False):
+           denoise=False, scheduler=None, workers=None, segments_dir=None):
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
     spp        samples per pixel (default: the scene's render.spp); ignored when `time` is given
@@ -127,11 +127,29 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     stats also records tracer_version, git_commit (HEAD of the package's checkout, "-dirty" with
     changes to tracked files, None without git), command_line (sys.argv) and date (ISO 8601).
 
+    scheduler, workers: split the render over Dask (a scheduler's address, or a LocalCluster of
+               `workers` processes): segment k renders with seed + k and its share of spp (or the
+               whole `time` each), and the segments are merged in seed order, each z-checked against
+               the rest (tracer.distributed); segments_dir keeps finished segments so that a run
+               started again renders only the missing ones. stats["segments"] lists them.
+
     Determinism: a render is a function of its settings, bit for bit, whatever the thread count.
     The wave size does not change it either, except where a guide splits paths (`split`, `window`):
     copies are made only into free room of the wave's buffer, so a smaller wave makes fewer of them
     (each choice is unbiased; tests/guiding/test_guides.py).
     """
+    if scheduler is not None or workers is not None:
+        from .distributed import render_on_dask
+
+        kw = dict(spp=spp, time=time, guide=guide, max_depth=max_depth, rr_depth=rr_depth, seed=seed, accel=accel,
+                  threads=threads, wave_size=wave_size, guide_settings=guide_settings, pixel_filter=pixel_filter,
+                  crop=crop, integrator=integrator, integrator_settings=integrator_settings, shift=shift, recon=recon,
+                  recon_alpha=recon_alpha, shift_roughness=shift_roughness, recon_settings=recon_settings,
+                  path_loop=path_loop, denoise=denoise)
+        if callback is not None:
+            raise SettingsError("a callback sees one process's passes: not with scheduler or workers")
+        return render_on_dask(scene, kw, scheduler=scheduler, workers=workers, segments_dir=segments_dir,
+                              progress=progress)
     if threads is not None:
         threads = _int_setting("threads", threads, 1)
     n_threads = min(threads or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS)
@@ -236,6 +254,10 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
             raise SettingsError("guide_settings go with a guide name, not with a guide object")
 
     integ.check_guide(g, guide)
+    if scene.delta_lights and not integ.nee:
+        kinds = ", ".join(sorted({d.kind for d in scene.delta_lights}))
+        raise SettingsError(f"{scene.path}: its {kinds} light(s) are reached by next-event estimation alone; "
+                            f"without it (nee=0) they would add nothing: render with NEE on")
     integ.start()
     if g is not None and not integ.nee:
         g.learn_direct = True  # without NEE, the direct light is the guide's to find too

@@ -68,6 +68,26 @@ class Environment:
 
 
 @dataclass
+class DeltaLight:
+    """A light of no extent, reached by next-event estimation alone (a path never hits it), as Mitsuba 3
+    defines it: `point` (intensity I, W/sr: I / d^2 at distance d), `spot` (a point light whose
+    intensity falls off linearly in angle from I inside the beam to 0 at the cutoff, about its
+    +z axis), `directional` (irradiance E arriving from one direction)."""
+
+    kind: str  # "point", "spot" or "directional"
+    intensity: np.ndarray  # (3,) W/sr (point, spot) or irradiance W/m^2 (directional)
+    position: np.ndarray = field(default_factory=lambda: np.zeros(3))  # point, spot
+    direction: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))  # unit, world: the spot's
+    # axis, the directional light's direction of travel
+    cutoff: float = math.radians(20.0)  # spot: no light beyond this angle from the axis (radians)
+    beam: float = math.radians(15.0)  # spot: full intensity within this angle (radians)
+    where: str = ""  # the file and line that declared it (messages)
+
+    def __repr__(self):
+        return f"DeltaLight({self.kind}, intensity={np.round(self.intensity, 4).tolist()})"
+
+
+@dataclass
 class RenderSettings:
     spp: int = 16
     max_depth: int = -1  # Mitsuba convention: 1 = emitters seen directly, 2 = direct light, -1 = unlimited
@@ -84,6 +104,7 @@ class Scene:
     tri_uv       (F, 3, 2) float64  corner UVs, or (0, 3, 2) when the scene has none
     tri_vn       (F, 3, 3) float64  corner normals (zero rows: flat triangles), or (0, 3, 3)
     textures     the Textures the materials' slots index
+    delta_lights [DeltaLight]: point, spot and directional lights
     """
 
     path: str
@@ -101,6 +122,7 @@ class Scene:
     tri_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 2)))
     tri_vn: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
     textures: Textures = field(default_factory=Textures)
+    delta_lights: list = field(default_factory=list)  # [DeltaLight]
 
     @property
     def n_triangles(self):
@@ -115,7 +137,8 @@ class Scene:
         return (
             f"Scene({os.path.basename(self.path)!r}, {self.n_triangles} triangles, "
             f"{len(self.materials.names)} materials, {int(self.emissive.sum())} emissive triangles, "
-            f"{self.width}x{self.height}, env={self.environment!r})"
+            f"{self.width}x{self.height}, env={self.environment!r}"
+            + (f", {len(self.delta_lights)} delta lights)" if self.delta_lights else ")")
         )
 
 
@@ -153,6 +176,7 @@ class SceneSpec:
                   eighth), emission (3,) float64[, tex])],
                   tex the index into `textures` of each texture slot (kd, ks, bump; -1 none)
     textures      [tracer.textures.TextureSpec]
+    delta_lights  [DeltaLight]: point, spot and directional lights
     no_light      what a scene without light lacks, in the reader's terms (the error's text)
     """
 
@@ -171,6 +195,7 @@ class SceneSpec:
     uv: np.ndarray | None = None
     normals: np.ndarray | None = None
     textures: list = field(default_factory=list)
+    delta_lights: list = field(default_factory=list)  # [DeltaLight]
 
 
 def load_scene(path, before_framing=None, define=None, allow_missing=False, **overrides):
@@ -364,11 +389,12 @@ def build_scene(spec, before_framing=None):
         tri_uv=np.ascontiguousarray(uv, dtype=np.float64) if uv is not None else np.zeros((0, 3, 2)),
         tri_vn=np.ascontiguousarray(vn, dtype=np.float64) if vn is not None else np.zeros((0, 3, 3)),
         textures=build_textures(spec.textures, spec.warnings),
+        delta_lights=list(spec.delta_lights),
     )
     prepare_coats(scene.materials, scene.textures)
     env = spec.environment
     has_env = env is not None and (env.image is not None or env.radiance.max() > 0)
-    if not scene.emissive.any() and not has_env:
+    if not scene.emissive.any() and not has_env and not any(d.intensity.max() > 0 for d in spec.delta_lights):
         raise SceneError(f"{scene.path}: the scene has no light: {spec.no_light}")
     if cs.framed:
         if before_framing is not None:

@@ -27,7 +27,8 @@ from . import bsdfs
 from ._jit import jit
 from .guiding.contract import slot_pdf, slot_sample
 from .material import crosses
-from .lights import env_pdf, env_radiance, sample_light, triangle_emission, triangle_light_pdf
+from .lights import (DELTA_DIRECTIONAL, LIGHT_ENV, delta_light_of, env_pdf, env_radiance, sample_light,
+                     triangle_emission, triangle_light_pdf)
 from .rng import DIR, LOBE, RR, STRATEGY, bounce_dim, draw
 from .sampling import dot, power_heuristic, to_local, to_world
 
@@ -62,17 +63,20 @@ def offset_point(x, ng, w, eps):
 @jit(inline="always")
 def shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps):
     """(origin, unit direction, tmax) of the shadow ray from x (normal ng, offset eps) toward the
-    light sample at distance dist along wl, on triangle lt_tri (-1: the environment, tmax inf).
+    light sample at distance dist along wl, on triangle lt_tri (lights.LIGHT_ENV or a directional
+    light: at infinity, tmax inf; a point or spot light: tmax the distance to it from the offset
+    origin).
     Both ends are offset by their own triangle's ray_offsets, the light's end along its normal
     toward x (pbrt-v4's SpawnRayTo), so the ray stops short of the light's plane as Embree sees it.
     tmax <= 0 means there is no room for a ray (x on the light)."""
     o = offset_point(x, ng, wl, eps)
-    if lt_tri < 0:
+    y = (x[0] + dist * wl[0], x[1] + dist * wl[1], x[2] + dist * wl[2])  # a point or spot light
+    if lt_tri >= 0:
+        li = lt.light_of_tri[lt_tri]
+        el = tri_eps[lt_tri]
+        y = (y[0] + el * lt.normal[li, 0], y[1] + el * lt.normal[li, 1], y[2] + el * lt.normal[li, 2])
+    elif lt_tri == LIGHT_ENV or lt.delta_kind[delta_light_of(lt_tri)] == DELTA_DIRECTIONAL:
         return o, wl, np.inf
-    li = lt.light_of_tri[lt_tri]
-    el = tri_eps[lt_tri]
-    y = (x[0] + dist * wl[0] + el * lt.normal[li, 0], x[1] + dist * wl[1] + el * lt.normal[li, 1],
-         x[2] + dist * wl[2] + el * lt.normal[li, 2])
     d = (y[0] - o[0], y[1] - o[1], y[2] - o[2])
     tmax = math.sqrt(dot(d, d))
     if not tmax > 0.0:
@@ -159,7 +163,8 @@ def next_event(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u
 @jit(inline="always")
 def light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1, table):
     """next_event with the light sample itself, as a LightSample. The gradient-domain tracer shifts
-    this sample to its offset paths."""
+    this sample to its offset paths. A delta light's sample (lt_tri < lights.LIGHT_ENV) has MIS weight 1
+    and mixture density 0: no direction the path samples reaches it."""
     wl, dist, le, pl, lt_tri = sample_light(lt, tri, x, u_light, u_pos0, u_pos1)
     ok = False
     so = x
@@ -173,7 +178,7 @@ def light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_e
         f = bsdfs.bsdf_eval(sf.bp, wo, wil, True, table)
         if crosses(sf, cos_o, ng, wo, wil, wl):
             f = BLACK
-        pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(sf.bp, wo, wil, table), wl)
+        pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(sf.bp, wo, wil, table), wl) if lt_tri >= LIGHT_ENV else 0.0
         if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
             w = power_heuristic(pl, pb)
             so, sd, tmax = shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps)

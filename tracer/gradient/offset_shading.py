@@ -10,7 +10,8 @@ from numba import prange
 from .. import bsdfs
 from .._jit import jit, kernel
 from ..integrators.path import MAX_BOUNCES
-from ..lights import ENV_NONE, env_pdf, env_radiance, triangle_emission, triangle_light_pdf
+from ..lights import (ENV_NONE, LIGHT_ENV, delta_arrival, delta_light_of, env_pdf, env_radiance, triangle_emission,
+                      triangle_light_pdf)
 from ..guiding.contract import locate
 from ..rng import LIGHT, LIGHT_POS, RR, bounce_dim, draw
 from ..material import crosses, surface_at, surface_at_point
@@ -201,7 +202,9 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
                 draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)), surf.mat_table)
             ok, so, sd, tmax, contrib = ls.ok, ls.origin, ls.direction, ls.tmax, ls.contrib
             wl, dist, lel, pll, lt_tri, fb, pbb = ls.wl, ls.dist, ls.le, ls.pl, ls.tri, ls.f, ls.pdf
-            valid = pll > 0.0 and (lel[0] > 0.0 or lel[1] > 0.0 or lel[2] > 0.0)
+            # (a delta light's sample counts where the base gets no light from it: past a spot's cutoff
+            # its offsets may be lit, and their NEE must enter the gradients all the same)
+            valid = pll > 0.0 and (lel[0] > 0.0 or lel[1] > 0.0 or lel[2] > 0.0 or lt_tri < LIGHT_ENV)
             if valid and not ok:  # no value, but its visibility enters the pairs' weights
                 so, sd, tmax = shadow_ray(x, ng, surf.eps[p], wl, dist, lt, lt_tri, surf.eps)
                 ok = tmax > 0.0
@@ -253,11 +256,17 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
                         cos_l = -dot(wlo, nl)
                         leo = triangle_emission(lt, lt_tri, cos_l)
                         plo = triangle_light_pdf(lt, lt_tri, disto * disto, cos_l)
+                    elif st == TRACED and lt_tri < LIGHT_ENV:  # the same delta light, seen from y: Jacobian 1
+                        wlo, disto, leo = delta_arrival(lt, delta_light_of(lt_tri), y)
+                        if not disto > 0.0:
+                            n_mode[i, o] = NEE_BASE_ALONE
+                            continue
                     wil = to_local(wlo, sfy.s, sfy.t, sfy.ns)
                     fo = bsdfs.bsdf_eval(sfy.bp, wo_o, wil, True, surf.mat_table)
                     if crosses(sfy, dot(wo_y, ngy), ngy, wo_o, wil, wlo):
                         fo = (0.0, 0.0, 0.0)
-                    n_pbo[i, o] = path_density(gs, sfy.bp, y, ngy, wo_y, wlo, bsdfs.bsdf_pdf(sfy.bp, wo_o, wil, surf.mat_table), False)
+                    n_pbo[i, o] = 0.0 if lt_tri < LIGHT_ENV else path_density(
+                        gs, sfy.bp, y, ngy, wo_y, wlo, bsdfs.bsdf_pdf(sfy.bp, wo_o, wil, surf.mat_table), False)
                     n_plo[i, o] = plo
                     n_rj[i, o] = o_R[i, o] * jl
                     for c in range(3):

@@ -9,7 +9,7 @@ opacity value or texture: params[P_CLEAR]) and `bumpmap` (a height texture and i
 any of them; textures `bitmap` (0.6's `gamma`, 3's `raw`) and `checkerboard` with a `to_uv` scale/translate/matrix; shapes
 `obj` (with `to_world`, `face_normals`, `flip_normals`; without vn, Mitsuba's smooth normals),
 `rectangle`, `cube`, `sphere`, `disk`, `cylinder` (tessellated, area exact), an `area` emitter on
-a shape, a `constant` emitter; the `perspective` sensor (`fov`, `fov_axis` x, y, diagonal,
+a shape, `constant` and `envmap` emitters, `point`, `spot` and `directional` lights; the `perspective` sensor (`fov`, `fov_axis` x, y, diagonal,
 smaller, larger, `to_world` as a matrix or lookat), the film's size, the integrator's `max_depth`
 and the sampler's `sample_count`. Everything else is one warning naming the file and line (a
 shape or BSDF it cannot read is left out or replaced, as the warning says).
@@ -36,7 +36,7 @@ from ..material import (
     TEX_SLOT_OPACITY,
 )
 from ..metals import METALS
-from ..scene import CameraSpec, Environment, RenderSettings, SceneSpec
+from ..scene import CameraSpec, DeltaLight, Environment, RenderSettings, SceneSpec
 from ..textures import TextureSpec, srgb_decode
 from .meshes import read_ply, read_serialized
 from .obj import read_geometry
@@ -48,7 +48,8 @@ _CAMEL = {"toWorld": "to_world", "faceNormals": "face_normals", "flipNormals": "
           "toUV": "to_uv", "filterType": "filter_type", "shapeIndex": "shape_index", "nearClip": "near_clip",
           "farClip": "far_clip", "rrDepth": "rr_depth", "hideEmitters": "hide_emitters", "extEta": "ext_eta",
           "flipTexCoords": "flip_tex_coords", "focalLength": "focal_length", "strictNormals": "strict_normals",
-          "maxSmoothAngle": "max_smooth_angle", "samplingWeight": "sampling_weight"}
+          "maxSmoothAngle": "max_smooth_angle", "samplingWeight": "sampling_weight",
+          "cutoffAngle": "cutoff_angle", "beamWidth": "beam_width"}
 # film properties that only shape the output file (its format, an LDR gamma; no pixel value changes): not warned
 FILM_OUTPUT = {"gamma", "pixel_format", "file_format", "component_format", "banner", "high_quality_edges", "attach_log",
                "pixelFormat", "fileFormat", "componentFormat", "highQualityEdges", "attachLog"}
@@ -260,6 +261,7 @@ class _Reader:
         self.by_name = {}  # material name -> index (a BSDF shared by shapes is one material)
         self.tris, self.mats, self.uvs, self.normals = [], [], [], []
         self.environment = None  # a constant emitter
+        self.delta_lights = []  # point, spot and directional lights
 
     # --- values ------------------------------------------------------------------------------
     def where(self, el):
@@ -346,7 +348,8 @@ class _Reader:
             raise SceneError(f"{self.where(el)}: malformed point") from None
 
     def emitter(self, el):
-        """A top-level emitter: `constant` as the scene's environment; the others one line each."""
+        """A top-level emitter: `constant` or `envmap` as the scene's environment, `point`, `spot` and
+        `directional` as delta lights; the others one line each."""
         kind = self.attr(el, "type")
         p = self.props(el)
         if kind in ("constant", "envmap") and self.environment is not None:
@@ -357,6 +360,8 @@ class _Reader:
             self.environment = Environment(rad)
         elif kind == "envmap":
             self.environment = self.envmap(el, p)
+        elif kind in ("point", "spot", "directional"):
+            self.delta_lights.append(self.delta_light(el, kind, p))
         elif kind in ("sunsky", "sky", "sun"):
             self.warn(el, f"emitter {kind!r} is not supported (no sun or sky model); the scene renders without it")
             return
@@ -365,6 +370,35 @@ class _Reader:
                           f"renders without it")
             return
         self.done(el, p)
+
+    def delta_light(self, el, kind, p):
+        """A `point` (intensity; position or to_world), `spot` (intensity, cutoff_angle and beam_width
+        in degrees, to_world: at its origin, shining along its +z) or `directional` (irradiance;
+        direction or to_world's +z, the direction the light travels) as a tracer.scene.DeltaLight."""
+        m = self.matrix(p["to_world"]) if "to_world" in p else np.eye(4)
+        name = "irradiance" if kind == "directional" else "intensity"
+        value = np.asarray(self.rgb(p[name]) if name in p else (1.0, 1.0, 1.0), float)
+        if not np.all(np.isfinite(value)) or value.min() < 0.0:
+            raise SceneError(f"{self.where(el)}: {kind} light's {name} must be finite and >= 0, got {value.tolist()}")
+        axis = m[:3, :3] @ np.array([0.0, 0.0, 1.0])
+        if kind == "directional" and "direction" in p:
+            axis = np.asarray(self.point(p["direction"]), float)
+        if not np.linalg.norm(axis) > 0.0:
+            raise SceneError(f"{self.where(el)}: {kind} light has no direction (a zero vector)")
+        light = DeltaLight(kind, value, np.asarray(m[:3, 3], float), axis / np.linalg.norm(axis), where=self.where(el))
+        if kind == "point" and "position" in p:
+            light.position = np.asarray(self.point(p["position"]), float)
+        if kind == "spot":
+            cutoff = self.number(p["cutoff_angle"]) if "cutoff_angle" in p else 20.0
+            beam = self.number(p["beam_width"]) if "beam_width" in p else 0.75 * cutoff
+            if not 0.0 <= beam <= cutoff <= 180.0:
+                raise SceneError(f"{self.where(el)}: a spot light needs 0 <= beam_width <= cutoff_angle <= 180 "
+                                 f"(degrees), got beam_width {beam:g}, cutoff_angle {cutoff:g}")
+            light.cutoff, light.beam = math.radians(cutoff), math.radians(beam)
+            if "texture" in p:
+                self.warn(p["texture"], "a spot light's projected texture is not supported; the spot renders "
+                                        "without it (uniform within its beam)")
+        return light
 
     def envmap(self, el, p):
         """An `envmap` emitter as the tracer's Environment in Mitsuba 3's convention (looked up as
@@ -809,9 +843,11 @@ class _Reader:
         return SceneSpec(path=self.path, geometry_file=self.path, tri=np.concatenate(self.tris),
                          tri_material=np.concatenate(self.mats), materials=self.materials, width=width,
                          height=height, render=render, camera=spec_cam, warnings=self.warnings,
-                         no_light="no area emitter on any shape and no constant emitter",
+                         no_light="no area emitter on any shape, no environment and no point, spot or "
+                                  "directional light",
                          environment=self.environment, uv=np.concatenate(self.uvs) if has_uv else None,
-                         normals=np.concatenate(self.normals) if has_n else None, textures=self.textures)
+                         normals=np.concatenate(self.normals) if has_n else None, textures=self.textures,
+                         delta_lights=self.delta_lights)
 
     def sensor(self, el, cam):
         if self.attr(el, "type") not in ("perspective", "thinlens"):

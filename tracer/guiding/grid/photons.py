@@ -2,7 +2,10 @@
 
 An emitter is chosen by power (the light tables NEE uses). From a triangle, the photon leaves a
 point uniform by area in a cosine-distributed direction on the emitting side, carrying
-Le * A * pi / P(triangle). From the environment, a direction is drawn by the environment's own
+Le * A * pi / P(triangle). From a point light, a uniform direction carrying 4 pi I / P(light);
+from a spot, a direction uniform in its cone carrying I falloff 2 pi (1 - cos cutoff) / P(light);
+from a directional light, a point of a disk of radius R across its direction, outside the scene,
+carrying E pi R^2 / P(light). From the environment, a direction is drawn by the environment's own
 importance sampling and the photon starts on a disk of the bounding sphere's radius R,
 perpendicular to it and outside the scene, carrying Le * pi R^2 / pdf(direction). Bounces sample
 the BSDF in importance mode (the adjoint), with Russian roulette on the throughput from the
@@ -32,7 +35,7 @@ from numba import prange
 
 from ... import bsdfs
 from ..._jit import jit, kernel
-from ...lights import sample_light
+from ...lights import DELTA_DIRECTIONAL, DELTA_POINT, sample_light, spot_falloff
 from ...material import adjoint_factor, crosses, surface_at
 from ...rng import P_DIR, P_LIGHT, P_POS, P_RR, photon_dim, photon_key, uniform
 from ...sampling import (
@@ -41,6 +44,7 @@ from ...sampling import (
     sample_concentric_disk,
     sample_cosine_hemisphere,
     sample_distribution_1d,
+    sample_uniform_sphere,
     sample_uniform_triangle,
     to_local,
     to_world,
@@ -182,6 +186,33 @@ def emit(lt, tri, centre, radius, tri_eps, seed, iteration, g0, aim, key, o, d, 
         _, _, li = sample_distribution_1d(lt.func, lt.cdf, u)
         p_sel = (1.0 - lt.p_env) * (lt.cdf[li + 1] - lt.cdf[li])
         if not (p_sel > 0.0):
+            continue
+        if li >= lt.tri.shape[0]:  # a delta light
+            j = li - lt.tri.shape[0]
+            kind = lt.delta_kind[j]
+            ax = (lt.delta_dir[j, 0], lt.delta_dir[j, 1], lt.delta_dir[j, 2])
+            s, t = frame(ax)
+            u0, u1 = uniform(k, P_DIR), uniform(k, P_DIR + 1)
+            if kind == DELTA_DIRECTIONAL:
+                dx, dy = sample_concentric_disk(u0, u1)
+                scale = math.pi * radius * radius / p_sel
+                for c in range(3):
+                    o[i, c] = centre[c] + radius * (-1.01 * ax[c] + dx * s[c] + dy * t[c])
+                    d[i, c] = ax[c]
+                    power[i, c] = lt.delta_value[j, c] * scale
+                continue
+            if kind == DELTA_POINT:
+                w = sample_uniform_sphere(u0, u1)
+                scale = 4.0 * math.pi / p_sel
+            else:  # a spot: uniform in its cone
+                cz = 1.0 - u0 * (1.0 - lt.delta_cone[j, 0])
+                sz = math.sqrt(max(1.0 - cz * cz, 0.0))
+                w = to_world((sz * math.cos(2.0 * math.pi * u1), sz * math.sin(2.0 * math.pi * u1), cz), s, t, ax)
+                scale = spot_falloff(lt, j, w) * 2.0 * math.pi * (1.0 - lt.delta_cone[j, 0]) / p_sel
+            for c in range(3):
+                o[i, c] = lt.delta_pos[j, c]
+                d[i, c] = w[c]
+                power[i, c] = lt.delta_value[j, c] * scale
             continue
         tr = lt.tri[li]
         b1, b2 = sample_uniform_triangle(uniform(k, P_POS), uniform(k, P_POS + 1))
