@@ -228,8 +228,8 @@ def render_on_dask(scene, render_kw, scheduler=None, workers=None, segments_dir=
     guide = render_kw.get("guide", "bsdf")
     if budget is None and workers is not None and spp < workers:
         raise SettingsError(f"{spp} spp cannot be split over {workers} workers (at least one sample each)")
-    client, stack, n, threads = _client(scheduler, workers)
     t0 = _time.perf_counter()
+    client, stack, n, threads = _client(scheduler, workers)
     with stack:
         if budget is None and spp < n:
             raise SettingsError(f"{spp} spp cannot be split over {n} workers (at least one sample each)")
