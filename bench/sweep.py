@@ -58,13 +58,14 @@ def local_workers(threads):
 FRESH_AFTER = 40  # LocalCluster: cells per worker between restarts of its processes (see run)
 
 
-def run(fn, cells, done, threads=1, scheduler=None, workers=None, progress=True, desc="cells"):
+def run(fn, cells, done, threads=1, scheduler=None, workers=None, progress=True, desc="cells", fresh_after=None):
     """fn(cell) for every cell on Dask (fn importable by the workers: a module-level function);
     done(cell, result) in this process as each finishes. scheduler: a Dask scheduler address (None:
     a LocalCluster of `workers` processes, default local_workers(threads), each pinned to its
     cores; workers 0: no Dask, the cells in this process in order).
 
-    On the LocalCluster the cells go in batches of FRESH_AFTER per worker, the worker processes
+    On the LocalCluster the cells go in batches of fresh_after (default FRESH_AFTER; 0: one batch)
+    per worker, the worker processes
     restarted between batches: a worker's resident memory grew by 40-200 MB per cell over a
     594-cell sweep (to 20 GB on the 24 GB VM), which a plain loop of the same renders in one process
     does not do (docs/findings.md, 2026-11-27). A restart costs the worker's imports and its
@@ -90,7 +91,8 @@ def run(fn, cells, done, threads=1, scheduler=None, workers=None, progress=True,
         else:
             client = stack.enter_context(Client(scheduler))
         bar = stack.enter_context(tqdm(total=len(cells), desc=desc, unit="cell", disable=not progress))
-        step = FRESH_AFTER * n if pin else len(cells)
+        every = FRESH_AFTER if fresh_after is None else fresh_after
+        step = every * n if pin and every > 0 else len(cells)
         for b in range(0, len(cells), step):
             if b > 0:
                 client.restart()
