@@ -8,7 +8,8 @@ in variants that add one feature at a time, for bench.vs_mitsuba and tests/test_
 `envlit-room` is the guides' environment-lit interior (bench.schedule, bench.convergence with
 `--scene-dir bench/results/scenes`). `dining-room-sky` and `classroom-sky` are Bitterli's sun-lit
 scenes of ../shared/scenes-mitsuba with their `sunsky` emitter replaced by an envmap of the same
-sun direction and size (sky_image: a sky gradient and a sun disk, not Mitsuba's sunsky model),
+sun direction and size (sky_image: a sky gradient and a sun disk, not Mitsuba's sunsky model,
+which the originals now render with: tracer.sunsky),
 at 320 x 180; their meshes and textures are read from the shared folder. The references are in
 bench/results/references/<name>-mitsuba.
 

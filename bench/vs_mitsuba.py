@@ -8,7 +8,8 @@
 
 A scene argument that is not a file names a generated scene: `envlit` (every variant of
 bench.scenes_envlit, the environment-lit interior, one feature added at a time) or `envlit-<variant>`;
-`delta` (bench.scenes_delta: a room lit by a point, a spot or a directional light) or `delta-<kind>`.
+`delta` (bench.scenes_delta: a room lit by a point, a spot or a directional light) or `delta-<kind>`;
+`sunsky` (bench.scenes_sunsky: the room lit by a sun and sky) or `sunsky-<variant>`.
 
 Mitsuba 3 renders a copy of each file that it can load (`mitsuba_copy`: what it rejects is dropped
 or mapped the way the tracer reads it, e.g. 0.6's `extEta` folded into eta and k, `gamma` on a
@@ -30,7 +31,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 import tracer
-from bench import scenes_delta, scenes_envlit
+from bench import scenes_delta, scenes_envlit, scenes_sunsky
 from bench.atomic import write_text
 from tracer.metals import METALS
 from tracer.textures import srgb_decode
@@ -73,8 +74,13 @@ def mitsuba_copy(path, folder, allow_missing=False, size=None):
                     up.remove(owner)
                     up.insert(i, ET.Element("rgb", name=owner.get("name", "reflectance"), value="0.5"))
                     note("absent textures are the constant 0.5")
+    old = root.get("version", "3").startswith("0.")
     for el in root.iter():
         kind = el.get("type")
+        if el.tag == "emitter" and kind == "sunsky" and old:
+            _sunsky_06(el, path)
+            note("0.6 sunsky in 3's names: sunRadiusScale as sun_aperture, albedo 0.15, +y up as a to_world, "
+                 "the sun (a direction or a date and time) as sun_direction")
         if el.tag == "film":
             for c in _named(el, "width", "height"):
                 if size:
@@ -137,6 +143,34 @@ def mitsuba_copy(path, folder, allow_missing=False, size=None):
     return out, notes
 
 
+def _sunsky_06(el, path):
+    """Rewrite a 0.6 `sunsky` element in place into Mitsuba 3's terms, as tracer.readers.mitsuba
+    reads it: sunRadiusScale as sun_aperture, 0.6's albedo default, `scale` into both scales, 0.6's
+    +y-up frame as a to_world, a date/time/place as the sun's direction (0.6's formula)."""
+    from tracer.readers.mitsuba import read_sunsky
+
+    sky = read_sunsky(path)
+    names = {c.get("name"): c for c in el if c.get("name") is not None}
+    keep = {"turbidity", "skyScale", "sunScale", "albedo"}
+    scale = names.get("scale")
+    for k, c in names.items():
+        if k not in keep:
+            el.remove(c)
+    for k in ("skyScale", "sunScale"):
+        if k not in names and scale is not None:
+            el.append(ET.Element("float", name=k, value=scale.get("value")))
+    if "albedo" not in names:
+        el.append(ET.Element("float", name="albedo", value="0.15"))
+    l2w = np.linalg.inv(sky.world_to_local)
+    sun = l2w @ sky.sun
+    el.append(ET.Element("vector", name="sun_direction", x=f"{sun[0]:.9g}", y=f"{sun[1]:.9g}", z=f"{sun[2]:.9g}"))
+    el.append(ET.Element("float", name="sun_aperture", value=f"{np.degrees(2 * sky.sun_half_aperture):.9g}"))
+    t = ET.SubElement(el, "transform", name="to_world")
+    m = np.eye(4)
+    m[:3, :3] = l2w
+    ET.SubElement(t, "matrix", value=" ".join(f"{v:.12g}" for v in m.ravel()))
+
+
 def mitsuba_render(path, width, height, spp, seeds, allow_missing=False):
     """(seeds, H, W, 3) Mitsuba 3 images of the scene's copy, total seconds, the copy's notes."""
     import mitsuba as mi
@@ -179,13 +213,18 @@ def scene_paths(name):
         return [scenes_envlit.scene(v) for v in scenes_envlit.VARIANTS]
     if name.startswith("envlit-") and name[len("envlit-"):] in scenes_envlit.VARIANTS:
         return [scenes_envlit.scene(name[len("envlit-"):])]
+    if name == "sunsky":
+        return [scenes_sunsky.scene(v) for v in scenes_sunsky.VARIANTS]
+    if name.startswith("sunsky-") and name[len("sunsky-"):] in scenes_sunsky.VARIANTS:
+        return [scenes_sunsky.scene(name[len("sunsky-"):])]
     if name == "delta":
         return [scenes_delta.scene(k) for k in scenes_delta.KINDS]
     if name.startswith("delta-") and name[len("delta-"):] in scenes_delta.KINDS:
         return [scenes_delta.scene(name[len("delta-"):])]
     raise SystemExit(f"bench.vs_mitsuba: {name}: no such file, nor a generated scene (envlit, "
                      f"{', '.join('envlit-' + v for v in scenes_envlit.VARIANTS)}, delta, "
-                     f"{', '.join('delta-' + k for k in scenes_delta.KINDS)})")
+                     f"{', '.join('delta-' + k for k in scenes_delta.KINDS)}, sunsky, "
+                     f"{', '.join('sunsky-' + v for v in scenes_sunsky.VARIANTS)})")
 
 
 def main(argv=None):

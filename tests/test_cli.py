@@ -171,8 +171,8 @@ def test_undefined_material_without_light_names_the_cause(tmp_path, capsys):
 
 
 def test_warnings_print_before_the_failure_they_explain(tmp_path, capsys):
-    """A Mitsuba scene lit by a `sunsky` emitter alone: the warning that the emitter is not supported
-    comes on stderr before the error line "the scene has no light", which is the last line, and the
+    """A Mitsuba scene lit by a `sunsky` emitter alone whose sun is below the horizon: the warning that
+    it emits nothing comes on stderr before the error line "the scene has no light", which is the last line, and the
     run exits with 2. Detects held warnings dropped (or printed after the error) when a run fails."""
     xml = tmp_path / "sky.xml"
     xml.write_text("""<scene version="3.0.0">
@@ -180,13 +180,13 @@ def test_warnings_print_before_the_failure_they_explain(tmp_path, capsys):
         </transform><film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
         </sensor>
         <shape type="rectangle"/>
-        <emitter type="sunsky"><float name="turbidity" value="3"/></emitter>
+        <emitter type="sunsky"><vector name="sun_direction" x="0.3" y="0" z="-1"/></emitter>
     </scene>""")
     code, out, err = run_cli(capsys, xml, "-o", tmp_path / "o.exr")
     lines = [line for line in err.splitlines() if line.strip()]
     assert code == 2, (code, err)
     assert len(lines) == 2 and "Traceback" not in err, lines
-    assert lines[0].startswith("tracer: warning: ") and "'sunsky' is not supported" in lines[0]
+    assert lines[0].startswith("tracer: warning: ") and "below the horizon" in lines[0]
     assert lines[1].startswith("tracer: ") and "sky.xml" in lines[1] and "no light" in lines[1]
 
 

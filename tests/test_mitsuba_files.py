@@ -343,16 +343,16 @@ def test_an_8_bit_envmap_is_decoded_from_srgb_as_mitsuba_does(tmp_path):
 # --- what it does not read, and bad input --------------------------------------------------------
 def test_unused_properties_and_plugins_are_one_line_each(tmp_path):
     """A property nothing reads is one warning naming its file and line (three shapes with it: one
-    line, 'and 2 more'); an unknown shape plugin, a sunsky and a projector emitter one line each."""
+    line, 'and 2 more'); an unknown shape plugin, 0.6's `sky` alone and a projector emitter one line each."""
     body = "".join(f"""<shape type="rectangle"><float name="bogus" value="{k}"/>
         <transform name="to_world"><translate x="{k}"/></transform></shape>\n""" for k in range(3))
-    body += """<shape type="hair"/>\n<emitter type="sunsky"/>\n<emitter type="projector"/>"""
+    body += """<shape type="hair"/>\n<emitter type="sky"/>\n<emitter type="projector"/>"""
     path = _scene(tmp_path, body)
     spec = read_mitsuba_scene(path, None)
     lines = (tmp_path / "scene.xml").read_text().splitlines()
-    said = {k: [w for w in spec.warnings if k in w] for k in ("'bogus'", "'hair'", "'sunsky'", "'projector'")}
+    said = {k: [w for w in spec.warnings if k in w] for k in ("'bogus'", "'hair'", "'sky'", "'projector'")}
     assert all(len(v) == 1 for v in said.values()), spec.warnings
-    assert "and 2 more" in said["'bogus'"][0] and "no sun or sky model" in said["'sunsky'"][0]
+    assert "and 2 more" in said["'bogus'"][0] and "alone is not supported" in said["'sky'"][0]
     for k, (w,) in said.items():
         file, line = w.split(":")[:2]
         assert file == path and k.strip("'") in lines[int(line) - 1], (w, lines[int(line) - 1])

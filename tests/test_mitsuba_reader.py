@@ -248,7 +248,7 @@ SHAPES = """<scene version="3.0.0">
     <shape type="cylinder"><point name="p0" x="0" y="-1" z="-2"/><point name="p1" x="0.5" y="1.5" z="-2"/>
         <float name="radius" value="0.3"/><ref id="D"/></shape>
     <emitter type="constant"><rgb name="radiance" value="0.25, 0.5, 0.75"/></emitter>
-    <emitter type="sunsky"/>
+    <emitter type="sky"/>
 </scene>
 """
 
@@ -259,7 +259,7 @@ def test_analytic_shapes_emitters_and_fov_axes_match_mitsuba(tmp_path, axis):
     bounding box (to 1% of its size: the tessellation) and surface area (to 0.1%: the sphere,
     disk and cylinder keep their area by construction) against Mitsuba 3's own shapes; every
     triangle wound outward (the sphere's emission is one-sided); a constant emitter as the
-    environment; `sunsky` one warning line naming its line; the camera ray through the corner
+    environment; 0.6's `sky` alone one warning line naming its line; the camera ray through the corner
     pixel against Mitsuba's for every fov_axis (detects a fov converted on the wrong axis)."""
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("scalar_rgb")
@@ -269,13 +269,13 @@ def test_analytic_shapes_emitters_and_fov_axes_match_mitsuba(tmp_path, axis):
     from tracer.scene import build_scene
 
     ours = build_scene(read_mitsuba_scene(str(f), {"axis": axis}))
-    f2 = tmp_path / "for_mitsuba.xml"  # (Mitsuba takes one environment emitter: no sunsky)
-    f2.write_text(SHAPES.replace('    <emitter type="sunsky"/>\n', ""))
+    f2 = tmp_path / "for_mitsuba.xml"  # (Mitsuba 3 has no `sky`)
+    f2.write_text(SHAPES.replace('    <emitter type="sky"/>\n', ""))
     ref = mi.load_file(str(f2), axis=axis)
     m = ours.materials
     assert np.allclose(ours.environment.radiance, [0.25, 0.5, 0.75])
-    hit = [w for w in ours.warnings if "sunsky" in w]
-    sun_line = 1 + next(i for i, ln in enumerate(SHAPES.splitlines()) if "sunsky" in ln)
+    hit = [w for w in ours.warnings if "'sky'" in w]
+    sun_line = 1 + next(i for i, ln in enumerate(SHAPES.splitlines()) if '"sky"' in ln)
     assert len(hit) == 1 and f"shapes.xml:{sun_line}:" in hit[0] and "not supported" in hit[0]
     centres = {"A": (-1.5, 0, 0), "B": (1.2, 0.4, 0.3), "D": (0.25, 0.25, -2)}
     mid = {n[0]: ours.tri[ours.tri_material == k].reshape(-1, 3).mean(0) for k, n in enumerate(m.names)}

@@ -60,6 +60,7 @@ class Environment:
     path: str | None = None
     convention: str = "tracer"  # how the map is looked up: "tracer" or "mitsuba" (above)
     to_world: np.ndarray | None = None  # (3, 3) rotation, map frame -> world ("mitsuba"; None: identity)
+    sunsky: object = None  # the tracer.sunsky.SunSky the map was baked from, if any
 
     def __repr__(self):
         if self.image is not None:

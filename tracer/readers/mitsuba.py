@@ -9,7 +9,7 @@ opacity value or texture: params[P_CLEAR]) and `bumpmap` (a height texture and i
 any of them; textures `bitmap` (0.6's `gamma`, 3's `raw`) and `checkerboard` with a `to_uv` scale/translate/matrix; shapes
 `obj` (with `to_world`, `face_normals`, `flip_normals`; without vn, Mitsuba's smooth normals),
 `rectangle`, `cube`, `sphere`, `disk`, `cylinder` (tessellated, area exact), an `area` emitter on
-a shape, `constant` and `envmap` emitters, `point`, `spot` and `directional` lights; the `perspective` sensor (`fov`, `fov_axis` x, y, diagonal,
+a shape, `constant`, `envmap` and `sunsky` emitters, `point`, `spot` and `directional` lights; the `perspective` sensor (`fov`, `fov_axis` x, y, diagonal,
 smaller, larger, `to_world` as a matrix or lookat), the film's size, the integrator's `max_depth`
 and the sampler's `sample_count`. Everything else is one warning naming the file and line (a
 shape or BSDF it cannot read is left out or replaced, as the warning says).
@@ -49,7 +49,8 @@ _CAMEL = {"toWorld": "to_world", "faceNormals": "face_normals", "flipNormals": "
           "farClip": "far_clip", "rrDepth": "rr_depth", "hideEmitters": "hide_emitters", "extEta": "ext_eta",
           "flipTexCoords": "flip_tex_coords", "focalLength": "focal_length", "strictNormals": "strict_normals",
           "maxSmoothAngle": "max_smooth_angle", "samplingWeight": "sampling_weight",
-          "cutoffAngle": "cutoff_angle", "beamWidth": "beam_width"}
+          "cutoffAngle": "cutoff_angle", "beamWidth": "beam_width", "sunDirection": "sun_direction",
+          "skyScale": "sky_scale", "sunScale": "sun_scale", "sunRadiusScale": "sun_radius_scale"}
 # film properties that only shape the output file (its format, an LDR gamma; no pixel value changes): not warned
 FILM_OUTPUT = {"gamma", "pixel_format", "file_format", "component_format", "banner", "high_quality_edges", "attach_log",
                "pixelFormat", "fileFormat", "componentFormat", "highQualityEdges", "attachLog"}
@@ -261,6 +262,7 @@ class _Reader:
         self.by_name = {}  # material name -> index (a BSDF shared by shapes is one material)
         self.tris, self.mats, self.uvs, self.normals = [], [], [], []
         self.environment = None  # a constant emitter
+        self.version = "3"  # the <scene version="..."> attribute: 0.x reads 0.6's defaults
         self.delta_lights = []  # point, spot and directional lights
 
     # --- values ------------------------------------------------------------------------------
@@ -352,7 +354,7 @@ class _Reader:
         `directional` as delta lights; the others one line each."""
         kind = self.attr(el, "type")
         p = self.props(el)
-        if kind in ("constant", "envmap") and self.environment is not None:
+        if kind in ("constant", "envmap", "sunsky") and self.environment is not None:
             self.warn(el, "a second environment emitter; ignored")
             return
         if kind == "constant":
@@ -362,8 +364,10 @@ class _Reader:
             self.environment = self.envmap(el, p)
         elif kind in ("point", "spot", "directional"):
             self.delta_lights.append(self.delta_light(el, kind, p))
-        elif kind in ("sunsky", "sky", "sun"):
-            self.warn(el, f"emitter {kind!r} is not supported (no sun or sky model); the scene renders without it")
+        elif kind == "sunsky":
+            self.environment = self.sunsky(el, p)
+        elif kind in ("sky", "sun"):
+            self.warn(el, f"0.6's emitter {kind!r} alone is not supported (`sunsky` is); the scene renders without it")
             return
         else:
             self.warn(el, f"emitter {kind!r} is not supported (no next-event estimation for it yet); the scene "
@@ -399,6 +403,74 @@ class _Reader:
                 self.warn(p["texture"], "a spot light's projected texture is not supported; the spot renders "
                                         "without it (uniform within its beam)")
         return light
+
+    def sunsky(self, el, p):
+        """A `sunsky` emitter (sunsky_model) baked into an Environment; None with a warning when the
+        sun is below the horizon (it then emits nothing)."""
+        from .. import sunsky
+
+        s = self.sunsky_model(el, p)
+        if s.elevation < 0.0:
+            self.warn(el, f"sunsky: the sun is {-math.degrees(s.elevation):.1f} degrees below the horizon, so the "
+                          f"sun and sky emit nothing (as in Mitsuba 3); the scene renders without them")
+            return None
+        img, negative = sunsky.bake(s)
+        if negative:
+            self.warn(el, f"sunsky: {negative} texels of the baked map had a negative RGB channel (the sun is low: "
+                          f"{math.degrees(s.elevation):.1f} degrees), set to 0")
+        return Environment(np.zeros(3), img, f"sunsky at {self.where(el)}", convention="tracer", sunsky=s)
+
+    def sunsky_model(self, el, p):
+        """The tracer.sunsky.SunSky of a `sunsky` emitter as Mitsuba 3 defines it: Mitsuba 3's names
+        and 0.6's (sunDirection, skyScale, sunScale, sunRadiusScale, scale; albedo 0.15 by default in
+        a 0.x file); the sun from `sun_direction` or from the date, time and place; 0.6's frame has +y
+        up (3's +z). What has no counterpart is one warning."""
+        from .. import sunsky
+
+        old = self.version.startswith("0.")
+        m = self.matrix(p["to_world"]) if "to_world" in p else np.eye(4)
+        rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+        up_y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # 0.6's (x, y, z) -> 3's (x, -z, y)
+        w2l = up_y @ rot.T if old else rot.T
+        when = [k for k in ("year", "month", "day", "hour", "minute", "second", "latitude", "longitude", "timezone")
+                if k in p]
+        if "sun_direction" in p:
+            if when:
+                raise SceneError(f"{self.where(el)}: sunsky takes sun_direction or a date, time and place "
+                                 f"({', '.join(when)}), not both")
+            sun = w2l @ np.asarray(self.point(p["sun_direction"]), float)
+        else:
+            kw = {k: self.number(p[k]) for k in when}
+            for k in ("year", "month", "day"):
+                if k in kw:
+                    kw[k] = int(kw[k])
+            zenith, azimuth = sunsky.sun_angles(**kw)
+            st = math.sin(zenith)
+            if old:  # 0.6's toSphere in its +y-up frame, then into 3's
+                sun = up_y @ np.array([math.sin(azimuth) * st, math.cos(zenith), -math.cos(azimuth) * st])
+            else:  # 3's sph_to_dir(theta, azimuth - pi)
+                sun = np.array([-math.cos(azimuth) * st, -math.sin(azimuth) * st, math.cos(zenith)])
+        if not np.linalg.norm(sun) > 0.0:
+            raise SceneError(f"{self.where(el)}: sunsky sun_direction is a zero vector")
+        scale = self.number(p["scale"]) if old and "scale" in p else 1.0
+        aperture = (sunsky.SUN_APERTURE_DEG * self.number(p["sun_radius_scale"]) if old and "sun_radius_scale" in p
+                    else self.number(p["sun_aperture"]) if "sun_aperture" in p else sunsky.SUN_APERTURE_DEG)
+        if aperture <= 0.0:  # 0.6's sunRadiusScale 0: a directional sun
+            raise SceneError(f"{self.where(el)}: sunsky with a sun of size 0 (0.6's sunRadiusScale 0, a directional "
+                             f"sun) is not supported")
+        albedo = self.rgb(p["albedo"]) if "albedo" in p else (0.15,) * 3 if old else (0.3,) * 3
+        s = sunsky.SunSky(sun / np.linalg.norm(sun), w2l, self.number(p["turbidity"]) if "turbidity" in p else 3.0,
+                          np.asarray(albedo, float),
+                          self.number(p["sky_scale"]) if "sky_scale" in p else scale,
+                          self.number(p["sun_scale"]) if "sun_scale" in p else scale,
+                          math.radians(0.5 * aperture), self.where(el))
+        s.check()
+        unmapped = [k for k in ("stretch", "resolution", "extend", "complex_sun") if k in p]
+        if old or unmapped:
+            what = "Mitsuba 3's sun and sky model (Hosek-Wilkie, RGB), not 0.6's (Preetham's sun, its units)"
+            self.warn(el, f"sunsky renders {what if old else 'as Mitsuba 3 does'}"
+                          + (f"; {', '.join(unmapped)} not mapped" if unmapped else ""))
+        return s
 
     def envmap(self, el, p):
         """An `envmap` emitter as the tracer's Environment in Mitsuba 3's convention (looked up as
@@ -801,6 +873,7 @@ class _Reader:
         if root.tag != "scene":
             raise SceneError(f"{self.path}: the root element is <{root.tag}>, not <scene>")
         self.include(root, [os.path.abspath(self.path)])
+        self.version = root.get("version", "3")
         for el in root:
             if el.tag == "default":
                 self.defaults.setdefault(el.get("name"), el.get("value"))
@@ -895,6 +968,21 @@ class _Reader:
                 t *= width / height  # the fov is the vertical one
             cam.fov, cam.fov_axis = math.degrees(2.0 * math.atan(t)), "x"
         return cam, width, height, spp
+
+
+def read_sunsky(path, defines=None):
+    """The tracer.sunsky.SunSky of the first top-level `sunsky` emitter of a scene file (None if it
+    has none), without reading the rest of the scene."""
+    r = _Reader(path, defines)
+    root = _parse(path)
+    r.version = root.get("version", "3")
+    for el in root:
+        if el.tag == "default":
+            r.defaults.setdefault(el.get("name"), el.get("value"))
+    for el in root:
+        if el.tag == "emitter" and r.attr(el, "type") == "sunsky":
+            return r.sunsky_model(el, r.props(el))
+    return None
 
 
 def read_mitsuba_scene(path, defines=None, allow_missing=False):
