@@ -13,12 +13,13 @@ at the cube. The lights:
                  cutoff 35 and beam 18 degrees: the ring between them lies on the floor in view
     directional  travelling along (-0.3, -1, -0.45), irradiance (1.5, 1.3, 1): the open room is lit
                  from above and the cube's shadow falls on the floor and wall
+    spot-texture the spot projecting slide.png (slide(): 6 x 4 random colours) across its cone
 """
 import os
 
 from . import atomic
 
-KINDS = ("point", "spot", "directional")
+KINDS = ("point", "spot", "directional", "spot-texture")
 FOLDER = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "bench", "results", "scenes")
 
 CAMERA = """<sensor type="perspective"><float name="fov" value="50"/>
@@ -43,7 +44,19 @@ LIGHTS = {
         <float name="beam_width" value="18"/></emitter>""",
     "directional": """<emitter type="directional"><vector name="direction" x="-0.3" y="-1" z="-0.45"/>
         <rgb name="irradiance" value="1.5, 1.3, 1"/></emitter>""",
+    "spot-texture": """<emitter type="spot"><transform name="to_world"><lookat origin="-0.2, 1.6, 0.8"
+        target="0.1, 0, -0.2" up="0, 1, 0"/></transform><rgb name="intensity" value="9, 7, 5"/>
+        <float name="cutoff_angle" value="35"/><float name="beam_width" value="18"/>
+        <texture type="bitmap" name="texture"><string name="filename" value="slide.png"/></texture></emitter>""",
 }
+
+
+def slide():
+    """(4, 6, 3) the textured spot's image, linear: random colours (seed 5), coarse enough that each
+    texel covers a patch of the floor; written as an 8-bit sRGB PNG, which both renderers decode."""
+    import numpy as np
+
+    return np.random.default_rng(5).uniform(0.05, 1.0, size=(4, 6, 3))
 
 
 def xml(body, width=32, height=24):
@@ -57,6 +70,10 @@ def write(folder, kind, width=32, height=24, name="scene.xml"):
         raise ValueError(f"no delta-light scene {kind!r}; valid: {', '.join(KINDS)}")
     os.makedirs(folder, exist_ok=True)
     path = os.path.join(folder, name)
+    if kind == "spot-texture":
+        from tracer.imageio import write_image
+
+        write_image(os.path.join(folder, "slide.png"), slide())
     text = xml(ROOM + LIGHTS[kind], width, height)
     atomic.write(path, lambda tmp: open(tmp, "w").write(text))
     return path

@@ -81,6 +81,9 @@ class Lights(NamedTuple):
     delta_dir: np.ndarray  # (K, 3) unit: the spot's axis, the directional light's direction of travel
     delta_value: np.ndarray  # (K, 3) intensity (point, spot) or irradiance (directional)
     delta_cone: np.ndarray  # (K, 4) spot: cos(cutoff), cutoff, cos(beam), 1 / (cutoff - beam) (radians)
+    delta_frame: np.ndarray  # (K, 3, 3) spot: rows its local x, y, z axes (a projected texture's frame)
+    delta_tex: np.ndarray  # (K, H, W, 3) spot: its projected texture, padded to the largest
+    delta_tex_size: np.ndarray  # (K, 2) int64 (H, W) of each texture; (0, 0): none
 
 
 def luminance(rgb):
@@ -162,7 +165,8 @@ def build_lights(scene):
 
 
 def delta_tables(delta_lights):
-    """(kind, pos, dir, value, cone) arrays of Lights for a list of tracer.scene.DeltaLight."""
+    """(kind, pos, dir, value, cone, frame, tex, tex_size) arrays of Lights for a list of
+    tracer.scene.DeltaLight."""
     k = len(delta_lights)
     kind = np.array([DELTA_KINDS[d.kind] for d in delta_lights], dtype=np.int64)
     pos = np.array([d.position for d in delta_lights], dtype=np.float64).reshape(k, 3)
@@ -173,15 +177,26 @@ def delta_tables(delta_lights):
     for i, d in enumerate(delta_lights):
         width = d.cutoff - d.beam
         cone[i] = math.cos(d.cutoff), d.cutoff, math.cos(d.beam), 1.0 / width if width > 0 else 1e300
-    return kind, pos, axis, value, cone
+    frame = np.array([np.asarray(d.frame, np.float64) for d in delta_lights]).reshape(k, 3, 3)
+    texs = [d.texture if d.kind == "spot" and d.texture is not None else None for d in delta_lights]
+    size = np.array([t.shape[:2] if t is not None else (0, 0) for t in texs], dtype=np.int64).reshape(k, 2)
+    tex = np.zeros((k, max(1, int(size[:, 0].max(initial=0))), max(1, int(size[:, 1].max(initial=0))), 3))
+    for i, t in enumerate(texs):
+        if t is not None:
+            tex[i, :t.shape[0], :t.shape[1]] = t
+    return kind, pos, axis, value, cone, frame, tex, size
 
 
 def delta_power(delta, radius):
     """(K,) luminance power of each delta light: 4 pi I a point, I times the spot's falloff integrated
-    over the sphere (2 pi (1 - (sin c - sin b) / (c - b)) for cutoff c, beam b), E pi R^2 a
+    over the sphere (2 pi (1 - (sin c - sin b) / (c - b)) for cutoff c, beam b; times its projected
+    texture's mean, an estimate: the power only weighs the choice of light), E pi R^2 a
     directional light through the scene's bounding sphere of radius R."""
-    kind, _, _, value, cone = delta
+    kind, _, _, value, cone, _, tex, size = delta
     lum = luminance(value)
+    for i in range(kind.shape[0]):  # a projected texture: its mean (the cone's uv disc, roughly)
+        if size[i, 0] > 0:
+            lum[i] *= float(luminance(tex[i, :size[i, 0], :size[i, 1]]).mean())
     out = np.zeros(kind.shape[0])
     for i in range(kind.shape[0]):
         if kind[i] == DELTA_POINT:
@@ -208,6 +223,33 @@ def spot_falloff(lt, j, d):
 
 
 @jit(inline="always")
+def spot_value(lt, j, d):
+    """Spot light j's falloff times its projected texture (RGB) toward the unit world direction d it
+    shines along (Mitsuba 3's: uv = 1/2 + (x, y) / (2 z tan(cutoff)) in the spot's frame, bilinear
+    between texel centres, repeated, v = 0 the image's top row)."""
+    f = spot_falloff(lt, j, d)
+    h, w = lt.delta_tex_size[j, 0], lt.delta_tex_size[j, 1]
+    if h == 0 or f == 0.0:
+        return f, f, f
+    fr = lt.delta_frame[j]
+    lx = d[0] * fr[0, 0] + d[1] * fr[0, 1] + d[2] * fr[0, 2]
+    ly = d[0] * fr[1, 0] + d[1] * fr[1, 1] + d[2] * fr[1, 2]
+    lz = d[0] * fr[2, 0] + d[1] * fr[2, 1] + d[2] * fr[2, 2]
+    k = 0.5 / (lz * math.tan(lt.delta_cone[j, 1]))
+    x = (0.5 + lx * k) * w - 0.5
+    y = (0.5 + ly * k) * h - 0.5
+    x0, y0 = math.floor(x), math.floor(y)
+    fx, fy = x - x0, y - y0
+    ix0, iy0 = int(x0) % w, int(y0) % h
+    ix1, iy1 = (ix0 + 1) % w, (iy0 + 1) % h
+    t = lt.delta_tex[j]
+    w00, w01, w10, w11 = f * (1.0 - fy) * (1.0 - fx), f * (1.0 - fy) * fx, f * fy * (1.0 - fx), f * fy * fx
+    return (w00 * t[iy0, ix0, 0] + w01 * t[iy0, ix1, 0] + w10 * t[iy1, ix0, 0] + w11 * t[iy1, ix1, 0],
+            w00 * t[iy0, ix0, 1] + w01 * t[iy0, ix1, 1] + w10 * t[iy1, ix0, 1] + w11 * t[iy1, ix1, 1],
+            w00 * t[iy0, ix0, 2] + w01 * t[iy0, ix1, 2] + w10 * t[iy1, ix0, 2] + w11 * t[iy1, ix1, 2])
+
+
+@jit(inline="always")
 def delta_light_of(t):
     """The delta light a sample_light result t <= -2 came from (-1 for any other light)."""
     return LIGHT_ENV - 1 - t if t < LIGHT_ENV else -1
@@ -228,7 +270,9 @@ def delta_arrival(lt, j, y):
     wi = (dx / dist, dy / dist, dz / dist)
     s = 1.0 / d2
     if lt.delta_kind[j] == DELTA_SPOT:
-        s *= spot_falloff(lt, j, (-wi[0], -wi[1], -wi[2]))
+        f = spot_value(lt, j, (-wi[0], -wi[1], -wi[2]))
+        return wi, dist, (lt.delta_value[j, 0] * s * f[0], lt.delta_value[j, 1] * s * f[1],
+                          lt.delta_value[j, 2] * s * f[2])
     return wi, dist, (lt.delta_value[j, 0] * s, lt.delta_value[j, 1] * s, lt.delta_value[j, 2] * s)
 
 

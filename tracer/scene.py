@@ -73,7 +73,9 @@ class DeltaLight:
     """A light of no extent, reached by next-event estimation alone (a path never hits it), as Mitsuba 3
     defines it: `point` (intensity I, W/sr: I / d^2 at distance d), `spot` (a point light whose
     intensity falls off linearly in angle from I inside the beam to 0 at the cutoff, about its
-    +z axis), `directional` (irradiance E arriving from one direction)."""
+    +z axis, times an optional texture projected across the cone: for a local direction (x, y, z),
+    uv = 1/2 + (x, y) / (2 z tan(cutoff)), looked up bilinearly with repeat, v = 0 the image's top
+    row), `directional` (irradiance E arriving from one direction)."""
 
     kind: str  # "point", "spot" or "directional"
     intensity: np.ndarray  # (3,) W/sr (point, spot) or irradiance W/m^2 (directional)
@@ -82,6 +84,8 @@ class DeltaLight:
     # axis, the directional light's direction of travel
     cutoff: float = math.radians(20.0)  # spot: no light beyond this angle from the axis (radians)
     beam: float = math.radians(15.0)  # spot: full intensity within this angle (radians)
+    frame: np.ndarray = field(default_factory=lambda: np.eye(3))  # spot: rows its local x, y, z axes in the world
+    texture: np.ndarray | None = None  # spot: (H, W, 3) linear RGB projected across its cone (Mitsuba 3's)
     where: str = ""  # the file and line that declared it (messages)
 
     def __repr__(self):

@@ -399,10 +399,35 @@ class _Reader:
                 raise SceneError(f"{self.where(el)}: a spot light needs 0 <= beam_width <= cutoff_angle <= 180 "
                                  f"(degrees), got beam_width {beam:g}, cutoff_angle {cutoff:g}")
             light.cutoff, light.beam = math.radians(cutoff), math.radians(beam)
+            frame = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+            light.frame = np.ascontiguousarray(frame.T)
             if "texture" in p:
-                self.warn(p["texture"], "a spot light's projected texture is not supported; the spot renders "
-                                        "without it (uniform within its beam)")
+                light.texture = self.spot_texture(p["texture"])
         return light
+
+    def spot_texture(self, el):
+        """The (H, W, 3) image a spot light projects: a `bitmap` (as Mitsuba 3 decodes it; its
+        `to_uv` and filter are not read: bilinear, repeat), or None with a warning."""
+        from ..textures import read_texture
+
+        if el.tag == "ref":
+            el = self.ids.get(self.attr(el, "id"), el)
+        q = self.props(el)
+        if el.tag != "texture" or self.attr(el, "type") != "bitmap" or "filename" not in q:
+            self.warn(el, "a spot light's texture must be a bitmap (as in Mitsuba 3); the spot renders without it")
+            return None
+        file = self.file(el, self.attr(q["filename"], "value"))
+        if not os.path.isfile(file):
+            self.missing(el, "spot light texture", file, "the spot renders without it")
+            return None
+        raw = "raw" in q and self.attr(q["raw"], "value", "false").lower() == "true"
+        img = read_texture(file, gamma=1.0 if raw else 0.0, what="spot light texture").astype(np.float64)
+        if not np.all(np.isfinite(img)) or img.min() < 0.0:
+            raise SceneError(f"{file}: a spot light's texture has negative or non-finite pixels")
+        for k in ("to_uv", "filter_type", "wrap_mode"):
+            if k in q:
+                self.warn(q[k], f"a spot light texture's {k} is not read (bilinear, repeat)")
+        return img
 
     def sunsky(self, el, p):
         """A `sunsky` emitter (sunsky_model) baked into an Environment; None with a warning when the

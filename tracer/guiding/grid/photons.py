@@ -3,7 +3,8 @@
 An emitter is chosen by power (the light tables NEE uses). From a triangle, the photon leaves a
 point uniform by area in a cosine-distributed direction on the emitting side, carrying
 Le * A * pi / P(triangle). From a point light, a uniform direction carrying 4 pi I / P(light);
-from a spot, a direction uniform in its cone carrying I falloff 2 pi (1 - cos cutoff) / P(light);
+from a spot, a direction uniform in its cone carrying I falloff (times its projected texture)
+2 pi (1 - cos cutoff) / P(light);
 from a directional light, a point of a disk of radius R across its direction, outside the scene,
 carrying E pi R^2 / P(light). From the environment, a direction is drawn by the environment's own
 importance sampling and the photon starts on a disk of the bounding sphere's radius R,
@@ -35,7 +36,7 @@ from numba import prange
 
 from ... import bsdfs
 from ..._jit import jit, kernel
-from ...lights import DELTA_DIRECTIONAL, DELTA_POINT, sample_light, spot_falloff
+from ...lights import DELTA_DIRECTIONAL, DELTA_POINT, sample_light, spot_value
 from ...material import adjoint_factor, crosses, surface_at
 from ...rng import P_DIR, P_LIGHT, P_POS, P_RR, photon_dim, photon_key, uniform
 from ...sampling import (
@@ -204,15 +205,18 @@ def emit(lt, tri, centre, radius, tri_eps, seed, iteration, g0, aim, key, o, d, 
             if kind == DELTA_POINT:
                 w = sample_uniform_sphere(u0, u1)
                 scale = 4.0 * math.pi / p_sel
+                f = (scale, scale, scale)
             else:  # a spot: uniform in its cone
                 cz = 1.0 - u0 * (1.0 - lt.delta_cone[j, 0])
                 sz = math.sqrt(max(1.0 - cz * cz, 0.0))
                 w = to_world((sz * math.cos(2.0 * math.pi * u1), sz * math.sin(2.0 * math.pi * u1), cz), s, t, ax)
-                scale = spot_falloff(lt, j, w) * 2.0 * math.pi * (1.0 - lt.delta_cone[j, 0]) / p_sel
+                scale = 2.0 * math.pi * (1.0 - lt.delta_cone[j, 0]) / p_sel
+                f = spot_value(lt, j, w)
+                f = (f[0] * scale, f[1] * scale, f[2] * scale)
             for c in range(3):
                 o[i, c] = lt.delta_pos[j, c]
                 d[i, c] = w[c]
-                power[i, c] = lt.delta_value[j, c] * scale
+                power[i, c] = lt.delta_value[j, c] * f[c]
             continue
         tr = lt.tri[li]
         b1, b2 = sample_uniform_triangle(uniform(k, P_POS), uniform(k, P_POS + 1))
