@@ -235,6 +235,8 @@ def spot_value(lt, j, d):
     lx = d[0] * fr[0, 0] + d[1] * fr[0, 1] + d[2] * fr[0, 2]
     ly = d[0] * fr[1, 0] + d[1] * fr[1, 1] + d[2] * fr[1, 2]
     lz = d[0] * fr[2, 0] + d[1] * fr[2, 1] + d[2] * fr[2, 2]
+    if not lz > 0.0:  # (a cutoff of 90 degrees or more: the projection does not reach behind the spot)
+        return 0.0, 0.0, 0.0
     k = 0.5 / (lz * math.tan(lt.delta_cone[j, 1]))
     x = (0.5 + lx * k) * w - 0.5
     y = (0.5 + ly * k) * h - 0.5
