@@ -11,7 +11,7 @@ import tracer
 from tracer.errors import SettingsError
 from tracer.lights import LIGHT_ENV, build_lights, delta_arrival, luminance, sample_light
 from tracer.readers.mitsuba import read_mitsuba_scene
-from tracer.testing.stats import assert_clean, assert_z, z_critical
+from tracer.testing.stats import assert_clean, assert_z, clean_seed_images, z_critical
 from bench.scenes_delta import LIGHTS as ALL_LIGHTS, ROOM, xml
 from bench.scenes_delta import write as write_scene
 
@@ -235,13 +235,9 @@ def test_delta_lights_render_as_mitsuba_does(tmp_path, kind):
 
     path = write_scene(str(tmp_path), kind, W, H)
     scene = tracer.load_scene(path)
-    ours = []
-    for s in range(SEEDS):
-        r = tracer.render(scene, spp=SPP, seed=40 + s, pixel_filter="box")
-        assert_clean(r, kind)
-        ours.append(r.image)
+    ours = clean_seed_images(scene, SPP, SEEDS, 40, kind)
     theirs = mitsuba_render(path, W, H, SPP, SEEDS)[0]
-    c = compare(np.stack(ours).astype(np.float64), theirs)
+    c = compare(ours, theirs)
     zc = z_critical(len(ALL_LIGHTS) * 3)
     assert np.all((np.abs(c["z"]) < zc) | (np.abs(c["rel"]) <= 0.005)), \
         f"{kind}: ours {c['mean_ours']}, Mitsuba {c['mean_mi']}, z {c['z']}"

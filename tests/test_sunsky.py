@@ -11,7 +11,7 @@ import pytest
 import tracer
 from tracer import sunsky
 from tracer.readers.mitsuba import read_mitsuba_scene, read_sunsky
-from tracer.testing.stats import assert_clean, z_critical
+from tracer.testing.stats import assert_clean, clean_seed_images, z_critical
 from bench import scenes_sunsky
 
 # (turbidity, albedo, sun elevation in degrees, sun_aperture in degrees)
@@ -220,13 +220,9 @@ def test_sunsky_renders_as_mitsuba_does(tmp_path, variant):
 
     path = scenes_sunsky.write(str(tmp_path), variant, W, H)
     scene = tracer.load_scene(path)
-    ours = []
-    for k in range(SEEDS):
-        r = tracer.render(scene, spp=SPP, seed=60 + k, pixel_filter="box")
-        assert_clean(r, variant)
-        ours.append(r.image)
+    ours = clean_seed_images(scene, SPP, SEEDS, 60, variant)
     theirs = mitsuba_render(path, W, H, SPP, MI_SEEDS)[0]
-    c = compare(np.stack(ours).astype(np.float64), theirs)
+    c = compare(ours, theirs)
     assert np.all((np.abs(c["z"]) < z_critical(2 * 3)) | (np.abs(c["rel"]) <= 0.005)), \
         f"{variant}: ours {c['mean_ours']}, Mitsuba {c['mean_mi']}, z {c['z']}"
     assert c["excess"] <= 1.3, f"{variant}: per-pixel excess {c['excess']:.3f}"

@@ -51,3 +51,17 @@ def assert_clean(result, what="render"):
     n = result.stats["nonfinite_samples"]
     assert n == 0, f"{what}: {n} non-finite sample(s) were zeroed"
     assert np.isfinite(result.image).all() and np.isfinite(result.variance).all(), f"{what}: non-finite pixels"
+
+
+def clean_seed_images(scene, spp, seeds, first_seed, what="render", **kw):
+    """(seeds, H, W, 3) float64 images of `scene` rendered with seeds first_seed, first_seed + 1, ...
+    (box filter unless kw says otherwise), each checked by assert_clean."""
+    import tracer
+
+    kw.setdefault("pixel_filter", "box")
+    out = []
+    for k in range(seeds):
+        r = tracer.render(scene, spp=spp, seed=first_seed + k, **kw)
+        assert_clean(r, what)
+        out.append(r.image)
+    return np.stack(out).astype(np.float64)
