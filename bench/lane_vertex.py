@@ -40,7 +40,9 @@ import numpy as np
 from numba import njit, prange
 
 import tracer
+from tracer.guiding.records import Records
 from tracer.integrators import path as path_mod
+from tracer.wave import Continuation, PathState, ShadowRays
 
 from . import atomic, throughput
 
@@ -253,7 +255,7 @@ def capture(name, spp, width, height):
     shade = path_mod.shade
 
     def keep(*args):
-        calls.append(tuple(a.copy() if isinstance(a, np.ndarray) else a for a in args))
+        calls.append(tuple(a.copy() if isinstance(a, np.ndarray) else a for a in flat(args)))
         return shade(*args)
 
     path_mod.shade = keep
@@ -384,7 +386,20 @@ def time_shade(calls, repeat):
     return best
 
 
-shade_kernel = path_mod.shade
+def flat(args):
+    """path.shade's arguments with every bundle spread, in field order: active, ray_o, ray_d, t, prim,
+    b1, b2, surf, lights, guide, samples, max_depth, rr_depth, nee, the PathState (14-25), the
+    Continuation (26-28), the ShadowRays (29-33), record, rec_base, the Records (36-)."""
+    a = list(args)
+    return tuple(a[:3] + list(a[3]) + a[4:8] + list(a[8]) + list(a[9]) + list(a[10]) + list(a[11]) + a[12:14]
+                 + list(a[14]))
+
+
+def shade_kernel(*a):
+    """path.shade called with the flat arguments of `flat`."""
+    return path_mod.shade(a[0], a[1], a[2], tuple(a[3:7]), a[7], a[8], a[9], a[10], tuple(a[11:14]),
+                          PathState(*a[14:26]), Continuation(*a[26:29]), ShadowRays(*a[29:34]), a[34], a[35],
+                          Records(*a[36:]))
 
 
 def time_lanes(kernel, batches, scene, lim, repeat):

@@ -359,49 +359,101 @@ def test_the_renderer_imports_nothing_of_learn_bench_or_tests():
     assert _layer_violations(".", ("learn", "bench", "tests")) == []
 
 
-def _names(bundle, prefix="", special=None):
-    special = special or {}
-    return [special.get(f, prefix + f) for f in bundle._fields]
+def _jitted_functions(path):
+    """(name, parameter count, decorator) of each function of a source file decorated with the
+    tracer's `kernel` or `jit`."""
+    import ast
+
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.FunctionDef):
+            for dec in node.decorator_list:
+                name = ast.unparse(dec.func if isinstance(dec, ast.Call) else dec)
+                if name in ("kernel", "jit"):
+                    found.append((node.name, len(node.args.args) + len(node.args.kwonlyargs), name))
+    return found
 
 
-def test_kernel_parameters_follow_their_bundles():
-    """Call sites splat the bundles declared once in wave.py, context.py, records.py and
-    gradient/offsets.py into kernels that take the arrays one by one (see the next test). Each
-    kernel's parameter names must run in the bundles' field order, so that two fields swapped in
-    a signature (which would compile and run) fail here."""
-    import inspect
+def _source_files():
+    import pathlib
 
-    from tracer.gradient.offset_shading import add_next_event, shade_hybrid
-    from tracer.gradient.offsets import BaseBounce, NeeTerms, Offsets, shift_offsets, start_offsets
-    from tracer.guiding.records import Records
-    from tracer.integrators.path import shade
-    from tracer.integrators.thread_loop import trace_paths
-    from tracer.wave import Continuation, PathState, ShadowQueue, ShadowRays, compact
-
-    surf = ["surf"]  # material.Surfaces travels whole: the kernels only read it
-    shadow = _names(ShadowRays, "sh_", {"has": "has_shadow"})
-    offsets = _names(Offsets, "o_", {f: f for f in ("G", "hit_t", "hit_prim", "hit_b1", "hit_b2")})
-    nee = _names(NeeTerms, "n_", {"vis_b": "vis_b", "vis": "vis"})
-    expected = {
-        shade: [surf, _names(PathState), _names(Continuation), shadow, _names(Records, "r_")],
-        trace_paths: [surf, _names(PathState)],
-        compact: [_names(Continuation), shadow, _names(ShadowQueue, "sp_")],
-        shade_hybrid: [surf, _names(PathState), _names(Continuation), shadow, _names(BaseBounce, "b_"), offsets, nee],
-        shift_offsets: [surf, _names(BaseBounce, "b_"), offsets],
-        start_offsets: [offsets],
-        add_next_event: [shadow, nee],
-    }
-    for kernel, runs in expected.items():
-        params = list(inspect.signature(kernel.py_func).parameters)
-        for run in runs:
-            assert any(params[i:i + len(run)] == run for i in range(len(params))), (kernel.py_func.__name__, run)
+    return sorted(pathlib.Path(tracer.__file__).parent.rglob("*.py"))
 
 
-def test_numba_loses_parallel_writes_into_arrays_that_arrive_in_a_tuple():
-    """Why the kernels take arrays one by one: on the pinned Numba, a parallel loop's writes at
-    its own index into arrays unpacked from a NamedTuple argument are lost, while the same kernel
-    with the arrays as arguments keeps them. If this fails, a Numba release fixed it, and the
-    kernels could take their bundles whole."""
+def test_no_kernel_takes_more_than_16_parameters(tmp_path):
+    """Kernels take their state as the bundles declared once (wave.PathState, Continuation,
+    ShadowRays, ShadowQueue; records.Records; splitting.SplitPlan; gradient.offsets.BaseBounce,
+    Offsets, NeeTerms; photons.PhotonState, Deposits), not as their arrays one by one: no
+    parallel kernel takes more than 16 parameters. Detects a kernel that grows a long signature
+    again; the scan is checked on a planted file first."""
+    planted = tmp_path / "k.py"
+    planted.write_text("@kernel\ndef big(" + ", ".join(f"a{i}" for i in range(17)) + "):\n    pass\n"
+                       "@jit(inline='always')\ndef small(a):\n    pass\n")
+    assert _jitted_functions(planted) == [("big", 17, "kernel"), ("small", 1, "jit")]
+    kernels = [(str(path), name, n) for path in _source_files() for name, n, dec in _jitted_functions(path)
+               if dec == "kernel"]
+    assert len(kernels) > 20
+    assert [k for k in kernels if k[2] > 16] == []
+
+
+_BUNDLES = {"state": "PathState", "cont": "Continuation", "shr": "ShadowRays", "queue": "ShadowQueue",
+            "rec": "Records", "plan": "SplitPlan", "bb": "BaseBounce", "off": "Offsets", "nt": "NeeTerms",
+            "photons": "PhotonState", "dep": "Deposits"}
+# Local names that differ from "prefix + field": (bundle, field) -> name
+_RENAMED = {("shr", "has"): "has_shadow", ("plan", "hi"): "split_hi", ("plan", "low"): "split_low"}
+_PREFIX = {"shr": "sh_", "bb": "b_", "off": "o_", "nt": "n_", "rec": "r_", "dep": "dep_", "queue": "sp_"}
+
+
+def _bundle_bindings(path):
+    """(line, target, bundle, field, one target) of each assignment in a source file whose value
+    reads a field of a bundle parameter (`depth = state.depth`), or several (`a, b = st.a, st.b`)."""
+    import ast
+
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if not isinstance(node, ast.Assign) or len(node.targets) != 1:
+            continue
+        target, value = node.targets[0], node.value
+        pairs = [(target, value)]
+        if isinstance(target, ast.Tuple) and isinstance(value, ast.Tuple):
+            pairs = list(zip(target.elts, value.elts))
+        for t, v in pairs:
+            if (isinstance(t, ast.Name) and isinstance(v, ast.Attribute) and isinstance(v.value, ast.Name)
+                    and v.value.id in _BUNDLES):
+                out.append((node.lineno, t.id, v.value.id, v.attr, len(pairs) == 1))
+    return out
+
+
+def test_kernels_bind_bundle_fields_by_name_one_per_line(tmp_path):
+    """A kernel binds each field of a bundle it takes to the local of its own name before its
+    parallel loop (`depth = state.depth`, `o_beta = off.beta`; prefixes sh_, b_, o_, n_, r_, dep_,
+    sp_), one per statement. Detects two fields swapped in a binding (which would compile and
+    run), and a tuple assignment of several fields, whose arrays lose the loop's writes (next
+    test). The scan is checked on a planted file first."""
+    planted = tmp_path / "k.py"
+    planted.write_text("def f(state, off):\n    depth = state.prev_pdf\n    a, b = off.x, off.beta\n")
+    found = _bundle_bindings(planted)
+    assert [(t, b, f, one) for _, t, b, f, one in found] == [
+        ("depth", "state", "prev_pdf", True), ("a", "off", "x", False), ("b", "off", "beta", False)]
+    bad, seen = [], 0
+    for path in _source_files():
+        for line, target, bundle, field, one in _bundle_bindings(path):
+            seen += 1
+            names = {field, _PREFIX.get(bundle, "") + field, _RENAMED.get((bundle, field))}
+            if target not in names or not one:
+                bad.append((path.name, line, target, f"{bundle}.{field}"))
+    assert seen > 100
+    assert bad == []
+
+
+def test_numba_keeps_a_parallel_loops_writes_only_into_fields_bound_one_per_line():
+    """Why every kernel binds its bundles' fields one per line before its loop: on the pinned
+    Numba, a parallel loop loses its writes into arrays unpacked from a NamedTuple argument in one
+    tuple assignment (`beta, alive = pair`), and into fields written through the tuple inside the
+    loop (`pair.alive[k] = True`), while the fields bound one per statement (`alive = pair.alive`)
+    keep them all, as do arrays passed one by one. Detects a Numba release that loses the writes of
+    the one-per-line binding (the kernels would need their arrays one by one again); if only the
+    last assertions fail, a release fixed the other two forms."""
     from typing import NamedTuple
 
     from numba import njit, prange
@@ -411,8 +463,9 @@ def test_numba_loses_parallel_writes_into_arrays_that_arrive_in_a_tuple():
         alive: np.ndarray
 
     @njit(parallel=True, cache=False)
-    def through_tuple(active, pair):
-        beta, alive = pair
+    def one_per_line(active, pair):
+        beta = pair.beta
+        alive = pair.alive
         for k in prange(active.shape[0]):
             beta[active[k], 0] = 2.0
             alive[k] = True
@@ -423,10 +476,25 @@ def test_numba_loses_parallel_writes_into_arrays_that_arrive_in_a_tuple():
             beta[active[k], 0] = 2.0
             alive[k] = True
 
+    @njit(parallel=True, cache=False)
+    def unpacked(active, pair):
+        beta, alive = pair
+        for k in prange(active.shape[0]):
+            beta[active[k], 0] = 2.0
+            alive[k] = True
+
+    @njit(parallel=True, cache=False)
+    def through_the_tuple(active, pair):
+        for k in prange(active.shape[0]):
+            pair.beta[active[k], 0] = 2.0
+            pair.alive[k] = True
+
     active = np.arange(0, 1000, 2)
-    a = Pair(np.zeros((1000, 3)), np.zeros(1000, np.bool_))
-    b = Pair(np.zeros((1000, 3)), np.zeros(1000, np.bool_))
-    through_tuple(active, a)
+    a, b, c, d = (Pair(np.zeros((1000, 3)), np.zeros(1000, np.bool_)) for _ in range(4))
+    one_per_line(active, a)
     one_by_one(active, *b)
-    assert b.alive.sum() == 500 and b.beta[:, 0].sum() == 1000.0
-    assert a.alive.sum() < 500, "Numba kept the writes through the tuple: the kernels could take bundles whole"
+    unpacked(active, c)
+    through_the_tuple(active, d)
+    for kept in (a, b):
+        assert kept.alive.sum() == 500 and kept.beta[:, 0].sum() == 1000.0
+    assert c.alive.sum() < 500 and d.alive.sum() < 500, "Numba kept these writes: see the docstring"

@@ -41,8 +41,7 @@ def _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, aov_open, prev_rec, gai
 
 
 @kernel
-def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, whole_image, ps, pix, index, key, ray_o,
-                 ray_d, beta, L, depth, prev_pdf, prev_delta, aov, aov_open, prev_rec, gain):
+def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, whole_image, ps, state, index, ray_o, ray_d):
     """Camera rays for global path indices g0 .. g0+n-1 of a pass (sample-major order).
 
     crop = (x0, y0, w, h): the film covers that window of the width x height image; pix[i] is the
@@ -53,8 +52,20 @@ def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, who
     same position inside it, with the key and film pixel of (x, y). whole_image: the two pixel
     dimensions place the sample anywhere in the crop window (its film pixel follows; inside the
     pixel at its centre with the point filter), for a warp of the whole image plane; else inside
-    the path's own pixel. index[i] = pix[i]: the sink's index is the film pixel.
+    the path's own pixel. index[i] = pix[i]: the sink's index is the film pixel. state: the
+    wave.PathState of the wave's first n paths (pix, key and the rest set here).
     """
+    pix = state.pix
+    key = state.key
+    beta = state.beta
+    L = state.L
+    depth = state.depth
+    prev_pdf = state.prev_pdf
+    prev_delta = state.prev_delta
+    aov = state.aov
+    aov_open = state.aov_open
+    prev_rec = state.prev_rec
+    gain = state.gain
     n = pix.shape[0]
     cw = crop[2]
     npix = crop[2] * crop[3]
@@ -88,10 +99,21 @@ def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, who
 
 
 @kernel
-def probe_paths(origins, directions, keys, g0, pix, index, key, ray_o, ray_d, beta, L, depth, prev_pdf, prev_delta,
-                aov, aov_open, prev_rec, gain):
+def probe_paths(origins, directions, keys, g0, state, index, ray_o, ray_d):
     """Paths from given rays g0 .. g0+n-1: index[i] = g0 + i (the row, for the sink), no film pixel
-    (pix -1: no per-pixel guide map, no weight window), key and ray as given."""
+    (pix -1: no per-pixel guide map, no weight window), key and ray as given; state: the
+    wave.PathState of the wave's first n paths."""
+    pix = state.pix
+    key = state.key
+    beta = state.beta
+    L = state.L
+    depth = state.depth
+    prev_pdf = state.prev_pdf
+    prev_delta = state.prev_delta
+    aov = state.aov
+    aov_open = state.aov_open
+    prev_rec = state.prev_rec
+    gain = state.gain
     for i in prange(pix.shape[0]):
         g = g0 + i
         pix[i] = -1
@@ -126,10 +148,8 @@ class CameraSource:
     def start(self, ctx, buf, sample0, g0, n):
         ps = self._primary(g0, n)
         camera_paths(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, ctx.seed, sample0, g0,
-                     self.shift, self._whole_image(), ps, buf.pix[:n], buf.index[:n], buf.key[:n], buf.ray_o[:n],
-                     buf.ray_d[:n],
-                     buf.beta[:n], buf.L[:n], buf.depth[:n], buf.prev_pdf[:n], buf.prev_delta[:n], buf.aov[:n],
-                     buf.aov_open[:n], buf.prev_rec[:n], buf.gain[:n])
+                     self.shift, self._whole_image(), ps, buf.path_state(n), buf.index[:n], buf.ray_o[:n],
+                     buf.ray_d[:n])
         return ps
 
     def _whole_image(self):
@@ -207,9 +227,8 @@ class ProbeSource:
         return self.origins.shape[0]
 
     def start(self, ctx, buf, sample0, g0, n):
-        probe_paths(self.origins, self.directions, self.keys, g0, buf.pix[:n], buf.index[:n], buf.key[:n], buf.ray_o[:n],
-                    buf.ray_d[:n], buf.beta[:n], buf.L[:n], buf.depth[:n], buf.prev_pdf[:n], buf.prev_delta[:n],
-                    buf.aov[:n], buf.aov_open[:n], buf.prev_rec[:n], buf.gain[:n])
+        probe_paths(self.origins, self.directions, self.keys, g0, buf.path_state(n), buf.index[:n], buf.ray_o[:n],
+                    buf.ray_d[:n])
         return self._ps
 
     def __repr__(self):

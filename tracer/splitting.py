@@ -83,17 +83,30 @@ def split_count(k, active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, dep
 
 
 @kernel
-def split_counts(active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing, pixel_est,
-                 hi, low, threshold, ks):
+def split_counts(active, ray_d, hits, tri, tri_normal, state, gs, plan, ks):
     """ks[k]: how many copies entry k's path goes on as (0: it ends here), for a path that hit a
-    surface after its first bounce; 1 elsewhere.
+    surface after its first bounce; 1 elsewhere. hits = (t, prim, b1, b2) of the entries; state:
+    the wave.PathState; plan: the SplitPlan.
 
-    Weight window (hi > 0), where the guide's voxel has an outgoing radiance estimate Lo: the path's
-    expected share of its pixel is q = lum(beta) Lo / I (I = pixel_est of its pixel). Above hi it
-    splits into min(ceil(q / hi), SPLIT_MAX) copies; below low it survives a roulette with probability
-    max(q / low, WINDOW_MIN_SURVIVAL), its beta and gain divided by that (here, in place). Elsewhere
-    (no window, or no estimate): throughput splitting, min(ceil(max beta), SPLIT_MAX) copies where
-    max beta > threshold > 0. Returns (sum of ks, entries with ks 0)."""
+    Weight window (plan.hi > 0), where the guide's voxel has an outgoing radiance estimate Lo: the
+    path's expected share of its pixel is q = lum(beta) Lo / I (I = pixel_est of its pixel). Above
+    hi it splits into min(ceil(q / hi), SPLIT_MAX) copies; below low it survives a roulette with
+    probability max(q / low, WINDOW_MIN_SURVIVAL), its beta and gain divided by that (here, in
+    place). Elsewhere (no window, or no estimate): throughput splitting, min(ceil(max beta),
+    SPLIT_MAX) copies where max beta > threshold > 0. Returns (sum of ks, entries with ks 0)."""
+    prim = hits[1]
+    b1 = hits[2]
+    b2 = hits[3]
+    beta = state.beta
+    gain = state.gain
+    depth = state.depth
+    pix = state.pix
+    key = state.key
+    outgoing = plan.outgoing
+    pixel_est = plan.pixel_est
+    hi = plan.hi
+    low = plan.low
+    threshold = plan.threshold
     wanted = 0
     ended = 0
     for k in prange(active.shape[0]):
@@ -296,9 +309,8 @@ def split_wave(buf, active, n_active, n_slots, hits, rd, ctx, plan, stats):
     arrays (t, prim, b1, b2) of the kept entries and copies). Unchanged when nothing splits or ends."""
     t, prim, b1, b2 = hits
     ks = buf.ks[:n_active]
-    wanted, ended = split_counts(active[:n_active], rd, prim, b1, b2, ctx.scene.tri, ctx.tri_normal, buf.beta,
-                                 buf.gain, buf.depth, buf.pix, buf.key, ctx.guide_state, plan.outgoing,
-                                 plan.pixel_est, plan.hi, plan.low, plan.threshold, ks)
+    wanted, ended = split_counts(active[:n_active], rd, hits, ctx.scene.tri, ctx.tri_normal, buf.path_state(),
+                                 ctx.guide_state, plan, ks)
     if wanted == n_active and ended == 0:
         return n_active, n_slots, hits
     hit2 = buf.copy_hits(t, prim, b1, b2)
@@ -317,8 +329,8 @@ def warm_up_splitting(ctx):
     buf = WaveBuffers(1, split=True)
     ks = buf.ks[:1]
     e = (np.zeros(1), np.full(1, -1, np.int32), np.zeros(1), np.zeros(1))
-    split_counts(buf.active[:1], buf.ray_d[:1], e[1], e[2], e[3], ctx.scene.tri, ctx.tri_normal, buf.beta, buf.gain,
-                 buf.depth, buf.pix, buf.key, ctx.guide_state, np.zeros(1), np.ones(1), 1.0, 0.1, 1.0, ks)
+    split_counts(buf.active[:1], buf.ray_d[:1], e, ctx.scene.tri, ctx.tri_normal, buf.path_state(), ctx.guide_state,
+                 SplitPlan(1.0, np.zeros(1), np.ones(1), 1.0, 0.1), ks)
     split_paths(buf.active, ks, *e, *e, buf.ray_o, buf.ray_d, buf.beta, buf.gain, buf.L, buf.depth, buf.prev_pdf,
                 buf.prev_delta, buf.key, buf.pix, buf.prev_rec, buf.parent, 1, buf.capacity)
     merge_copies(buf.L, buf.parent, 1, 1)

@@ -77,14 +77,31 @@ class ShadowQueue(NamedTuple):
 
 
 @kernel
-def compact(active, alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
-            dst_active, dst_o, dst_d, sp_path, sp_entry, sp_o, sp_d, sp_tmax, sp_L):
-    """Pack the continuing paths (alive: a Continuation) to the front of dst_active, dst_o, dst_d
-    and the shadow rays (has_shadow: ShadowRays) to the front of the ShadowQueue sp_*, keeping
-    their order (sp_entry: the entry k a shadow ray came from). Returns (continuing, shadow rays).
+def compact(active, cont, shr, dst, queue):
+    """Pack the continuing paths (cont.alive: a Continuation) to the front of dst = (active, ray
+    origins, ray directions) and the shadow rays (shr.has: ShadowRays) to the front of the
+    ShadowQueue `queue`, keeping their order (queue.entry: the entry k a shadow ray came from).
+    Returns (continuing, shadow rays).
 
     Two parallel passes over chunks: count per chunk, then write at the prefix-sum offsets.
     """
+    alive = cont.alive
+    next_o = cont.next_o
+    next_d = cont.next_d
+    sh_o = shr.o
+    sh_d = shr.d
+    sh_tmax = shr.tmax
+    sh_L = shr.L
+    has_shadow = shr.has
+    dst_active = dst[0]
+    dst_o = dst[1]
+    dst_d = dst[2]
+    sp_path = queue.path
+    sp_entry = queue.entry
+    sp_o = queue.o
+    sp_d = queue.d
+    sp_tmax = queue.tmax
+    sp_L = queue.L
     n = active.shape[0]
     counts = np.zeros((_CHUNKS + 1, 2), np.int64)
     for c in prange(_CHUNKS):
@@ -198,9 +215,10 @@ class WaveBuffers:
                   for k in (1, 2))
         return b1 + (b2 - b1) * (size - 1)
 
-    def path_state(self):
-        return PathState(self.beta, self.L, self.L_cam, self.depth, self.prev_pdf, self.prev_delta, self.gain,
-                         self.key, self.pix, self.aov, self.aov_open, self.prev_rec)
+    def path_state(self, n=None):
+        """The PathState of every slot, or of slots 0 .. n-1 (views)."""
+        return PathState(*(a[:n] for a in (self.beta, self.L, self.L_cam, self.depth, self.prev_pdf, self.prev_delta,
+                                           self.gain, self.key, self.pix, self.aov, self.aov_open, self.prev_rec)))
 
     def continuation(self):
         return Continuation(self.alive, self.next_o, self.next_d)

@@ -62,7 +62,7 @@ from ..sources import CameraSource
 from ..wave import sanitize
 from .films import add_gradients
 from .offsets import BLOCKED, HybridBuffers, shift_offsets, start_offsets
-from .offset_shading import add_next_event, shade_hybrid
+from .offset_shading import ShiftLimits, add_next_event, shade_hybrid
 
 
 _CAMERA = CameraSource()
@@ -75,20 +75,21 @@ def warm_up(ctx, buf, roughness, direct_roughness):
     t, prim, b1, b2 = ctx.accel.intersect(buf.ray_o[:0], buf.ray_d[:0])
     surf = ctx.surfaces
     start_offsets(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, no_primary_samples(),
-                  buf.key[:0], buf.pix[:0], *hb.offsets())
-    shift_offsets(idx, t, prim, b1, b2, buf.ray_d[:0], surf, ctx.guide_state, roughness, *hb.base(), *hb.offsets())
+                  buf.key[:0], buf.pix[:0], hb.offsets())
+    shift_offsets(idx, (t, prim, b1, b2), buf.ray_d[:0], surf, ctx.guide_state, float(roughness), hb.base(),
+                  hb.offsets())
     _shade(ctx, buf, hb, idx, buf.ray_d[:0], (t, prim, b1, b2), no_primary_samples(), roughness, direct_roughness)
     _add_next_event(buf, hb, idx)
 
 
 def _shade(ctx, buf, hb, active, rd, hits, ps, roughness, direct_roughness):
-    shade_hybrid(active, rd, *hits, ctx.surfaces, ctx.lights, ctx.guide_state, ps, ctx.max_depth, ctx.rr_depth,
-                 roughness, direct_roughness, *buf.path_state(), *buf.continuation(), *buf.shadow_rays(), *hb.base(), *hb.offsets(),
-                 *hb.nee_terms())
+    limits = ShiftLimits(int(ctx.max_depth), int(ctx.rr_depth), float(roughness), float(direct_roughness))
+    shade_hybrid(active, rd, hits, ctx.surfaces, ctx.lights, ctx.guide_state, ps, limits, buf.path_state(),
+                 buf.continuation(), buf.shadow_rays(), hb.base(), hb.offsets(), hb.nee_terms())
 
 
 def _add_next_event(buf, hb, active):
-    add_next_event(active, *buf.shadow_rays(), buf.L, buf.L_cam, hb.G, *hb.nee_terms())
+    add_next_event(active, buf.shadow_rays(), buf.L, buf.L_cam, hb.G, hb.nee_terms())
 
 
 def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness, direct_roughness):
@@ -100,7 +101,7 @@ def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness, dir
     t0 = _time.perf_counter()
     ps = _CAMERA.start(ctx, buf, sample0, g0, n)
     start_offsets(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, ps, buf.key[:n], buf.pix[:n],
-                  *hb.offsets())
+                  hb.offsets())
     active = np.arange(n)
     surf = ctx.surfaces
     t0 = stats.tick("camera", t0)
@@ -113,7 +114,7 @@ def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness, dir
         stats.rays += na
         t0 = stats.tick("intersect", t0)
         if bounce > 0:
-            shift_offsets(active, t, prim, b1, b2, rd, surf, ctx.guide_state, roughness, *hb.base(), *hb.offsets())
+            shift_offsets(active, (t, prim, b1, b2), rd, surf, ctx.guide_state, float(roughness), hb.base(), hb.offsets())
             t0 = stats.tick("shift", t0)
         # The offsets' own rays, and the visibility of their reconnections
         pi, po = np.nonzero(hb.trace[active])

@@ -4,6 +4,7 @@ base's next direction; add_next_event adds the NEE terms once the shadow rays ar
 weights are derived in hybrid.py's docstring."""
 
 import math
+from typing import NamedTuple
 
 from numba import prange
 
@@ -16,7 +17,7 @@ from ..guiding.contract import locate
 from ..rng import LIGHT, LIGHT_POS, RR, bounce_dim, draw
 from ..material import crosses, surface_at, surface_at_point
 from ..sampling import dot, to_local, triangle_point
-from ..shading import emitted_env, emitted_surface, light_sample_at, next_bounce, offset_point
+from ..shading import emitted_env, emitted_surface, light_sample_at, next_bounce, offset_point, survival
 from ..shading import shadow_ray, write_aovs, write_shadow
 from .offsets import BLOCKED, CONNECTED, TRACED
 from .shift import is_near_specular, is_rough, path_density, reconnection
@@ -25,6 +26,15 @@ from .shift import is_near_specular, is_rough, path_density, reconnection
 # partner path); the partner shares the base's shadow ray (the offset sits at the base's vertex);
 # the partner traces its own shadow ray
 NEE_NONE, NEE_BASE_ALONE, NEE_BASE_RAY, NEE_OWN_RAY = 0, 1, 2, 3
+
+
+class ShiftLimits(NamedTuple):
+    """The scalars of a hybrid bounce: path length limits and the shift's thresholds."""
+
+    max_depth: int  # bounces at most (-1: none)
+    rr_depth: int  # the depth from which the base plays Russian roulette
+    roughness: float  # bsdfs.bsdf_roughness above which a vertex is rough (reconnectable)
+    direct_roughness: float  # a first vertex smoother than it: its reflected light is direct light
 
 
 @jit(inline="always")
@@ -44,25 +54,86 @@ def _emitted_by(lt, tri_normal, q, wo, dist2, delta):
 
 
 @kernel
-def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
-                 ps, max_depth, rr_depth, roughness, direct_roughness,
-                 beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open, prev_rec,
-                 alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow,
-                 b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough, b_direct,
-                 o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights,
-                 o_trace, o_reconn, o_ray_o, o_ray_d, o_tmax, G, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o,
-                 o_sh_d, o_sh_tmax,
-                 n_cn, n_pl, n_pb, vis_b, n_mode, n_co, n_rj, n_plo, n_pbo, vis, n_direct):
+def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr, bb, off, nt):
     """One bounce of base and offset paths: the vertices the offsets reached, emission (the base's
     as the path tracer's, the gradients' with the pair weights), NEE shifted to the offsets, the
-    base's direction and roulette. The parameters are bundles splatted by hybrid.py (as
-    integrators.path.shade's): entry k is path active[k], its hit t, prim, b1, b2; the scene's
-    material.Surfaces (whole), lights, guide state, primary samples; the limits max_depth, rr_depth, the shift's
-    roughness and direct_roughness (a first vertex smoother than it puts the light it reflects, by NEE
-    or by its BSDF sample, into L_cam with the light seen directly: out of the gradients); the base's wave.PathState, Continuation and ShadowRays (its value for L); the
-    offsets.BaseBounce this bounce writes (b_*); the Offsets (o_*: their hits of traced rays in
-    hit_*, where o_trace; their own shadow rays o_sh, o_sh_*); the NeeTerms (n_*), weighted by
-    add_next_event once the shadow rays are traced."""
+    base's direction and roulette. Entry k is path active[k], its ray direction ray_d[k] and its hit
+    in hits = (t, prim, b1, b2); surf: the scene's material.Surfaces; lt: lights; gs: guide state;
+    ps: primary samples; limits: a ShiftLimits (max_depth, rr_depth, the shift's roughness and
+    direct_roughness: a first vertex smoother than it puts the light it reflects, by NEE or by its
+    BSDF sample, into L_cam with the light seen directly, out of the gradients). The base's
+    wave.PathState state, Continuation cont and ShadowRays shr (its value for L); the
+    offsets.BaseBounce bb this bounce writes; the Offsets off (their hits of traced rays in hit_*,
+    where trace; their own shadow rays sh, sh_*); the NeeTerms nt, weighted by add_next_event once
+    the shadow rays are traced."""
+    t = hits[0]
+    prim = hits[1]
+    b1 = hits[2]
+    b2 = hits[3]
+    max_depth = limits[0]
+    rr_depth = limits[1]
+    roughness = limits[2]
+    direct_roughness = limits[3]
+    beta = state.beta
+    L = state.L
+    L_cam = state.L_cam
+    depth = state.depth
+    prev_pdf = state.prev_pdf
+    prev_delta = state.prev_delta
+    gain = state.gain
+    key = state.key
+    pix = state.pix
+    aov = state.aov
+    aov_open = state.aov_open
+    alive = cont.alive
+    next_o = cont.next_o
+    next_d = cont.next_d
+    sh_o = shr.o
+    sh_d = shr.d
+    sh_tmax = shr.tmax
+    sh_L = shr.L
+    has_shadow = shr.has
+    b_x = bb.x
+    b_prim = bb.prim
+    b_wo = bb.wo
+    b_wt = bb.wt
+    b_pdf = bb.pdf
+    b_delta = bb.delta
+    b_rough = bb.rough
+    b_direct = bb.direct
+    o_alive = off.alive
+    o_status = off.status
+    o_beta = off.beta
+    o_R = off.R
+    o_x = off.x
+    o_prim = off.prim
+    o_wo = off.wo
+    o_pdf = off.pdf
+    o_delta = off.delta
+    o_dist2 = off.dist2
+    o_rough = off.rough
+    o_hv = off.hv
+    o_lights = off.lights
+    o_trace = off.trace
+    G = off.G
+    hit_t = off.hit_t
+    hit_prim = off.hit_prim
+    hit_b1 = off.hit_b1
+    hit_b2 = off.hit_b2
+    o_sh = off.sh
+    o_sh_o = off.sh_o
+    o_sh_d = off.sh_d
+    o_sh_tmax = off.sh_tmax
+    n_cn = nt.cn
+    n_pl = nt.pl
+    n_pb = nt.pb
+    n_mode = nt.mode
+    n_co = nt.co
+    n_rj = nt.rj
+    n_plo = nt.plo
+    n_pbo = nt.pbo
+    vis = nt.vis
+    n_direct = nt.direct
     for k in prange(active.shape[0]):
         i = active[k]
         alive[k] = False
@@ -299,7 +370,7 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
             if not (bo > 0.0 and math.isfinite(bo)):
                 continue
             if dk + 1 >= rr_depth:
-                q = min(bo / gn, 0.95)
+                q = survival((bo, bo, bo), gn, gs)  # the base's roulette, on the offsets' throughput
                 if draw(ps, kk, i, bounce_dim(dk, RR)) >= q:
                     continue
         no = offset_point(x, ng, wiw, surf.eps[p])
@@ -325,14 +396,26 @@ def shade_hybrid(active, ray_d, t, prim, b1, b2, surf, lt, gs,
 
 
 @kernel
-def add_next_event(active, sh_o, sh_d, sh_tmax, sh_L, has_shadow, L, L_cam, G, n_cn, n_pl, n_pb, vis_b, n_mode, n_co,
-                   n_rj, n_plo, n_pbo, vis, n_direct):
-    """Add the bounce's NEE once its shadow rays are traced (the base's ShadowRays, splatted, and
-    the NeeTerms n_* with the visibilities): the base's value to L, and to each pair's
+def add_next_event(active, shr, L, L_cam, G, nt):
+    """Add the bounce's NEE once its shadow rays are traced (the base's wave.ShadowRays shr, and
+    the NeeTerms nt with the visibilities): the base's value to L, and to each pair's
     gradient w (vis_o C_o - vis_b C_b), w = pL^2 / (pL^2 + pB^2 + (R J_L)^2 (pL_o^2 + pB_o^2)), where a
     blocked side's BSDF density is 0 (a BSDF sample cannot reach the light through the occluder).
-    NEE_BASE_ALONE (no partner): minus the base's own weighted value. n_direct: the base's value is
+    NEE_BASE_ALONE (no partner): minus the base's own weighted value. nt.direct: the base's value is
     direct light (L_cam) too."""
+    sh_L = shr.L
+    has_shadow = shr.has
+    n_cn = nt.cn
+    n_pl = nt.pl
+    n_pb = nt.pb
+    vis_b = nt.vis_b
+    n_mode = nt.mode
+    n_co = nt.co
+    n_rj = nt.rj
+    n_plo = nt.plo
+    n_pbo = nt.pbo
+    vis = nt.vis
+    n_direct = nt.direct
     for k in prange(active.shape[0]):
         i = active[k]
         vb = has_shadow[k] and vis_b[k]

@@ -151,12 +151,20 @@ def _offset(o):
 
 
 @kernel
-def start_offsets(cam, width, height, crop, jitter, ps, key, pix, o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights, o_trace,
-                  o_reconn, o_ray_o, o_ray_d, o_tmax, G, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o, o_sh_d,
-                  o_sh_tmax):
+def start_offsets(cam, width, height, crop, jitter, ps, key, pix, off):
     """Offset camera rays of base paths 0 .. n-1 (keys and film pixels from the camera source)
-    into the Offsets (o_*, splatted): through the neighbouring pixel at the base's position inside
-    its pixel."""
+    into the Offsets off: through the neighbouring pixel at the base's position inside its pixel."""
+    o_alive = off.alive
+    o_status = off.status
+    o_beta = off.beta
+    o_R = off.R
+    o_wo = off.wo
+    o_hv = off.hv
+    G = off.G
+    o_trace = off.trace
+    o_reconn = off.reconn
+    o_ray_o = off.ray_o
+    o_ray_d = off.ray_d
     cw = crop[2]
     for i in prange(key.shape[0]):
         px = crop[0] + pix[i] % cw
@@ -188,18 +196,43 @@ def _finite(o_beta, o_R, i, o):
 
 
 @kernel
-def shift_offsets(active, t, prim, b1, b2, ray_d, surf, gs, roughness, b_x, b_prim, b_wo, b_wt, b_pdf, b_delta, b_rough,
-                  b_direct,
-                  o_alive, o_status, o_beta, o_R, o_x, o_prim, o_wo, o_pdf, o_delta, o_dist2, o_rough, o_hv, o_lights, o_trace,
-                  o_reconn, o_ray_o, o_ray_d, o_tmax, G, hit_t, hit_prim, hit_b1, hit_b2, o_sh, o_sh_o, o_sh_d,
-                  o_sh_tmax):
-    """Shift each offset (the Offsets o_*) across the base's last bounce x_i -> x_{i+1} (the
-    BaseBounce b_*; entry k: path active[k], its ray ray_d[k] and hit t, prim, b1, b2; surf the
-    scene's material.Surfaces; gs: the guide's state, whose mixture gives an offset the density its own
-    pixel's path tracer would, shift.path_density): reconnection (a visibility ray to test, o_reconn) or half-vector
-    copy (a ray to trace, o_trace); updates beta_o, R, and the offset's last density. o_lights: whether
-    the pair's weights for this bounce count the light techniques (not after a half-vector copy, whose
-    pairs take no NEE either: NEE reconnects, and both techniques must map a path to the same partner)."""
+def shift_offsets(active, hits, ray_d, surf, gs, roughness, bb, off):
+    """Shift each offset (the Offsets off) across the base's last bounce x_i -> x_{i+1} (the
+    BaseBounce bb; entry k: path active[k], its ray ray_d[k] and hit in hits = (t, prim, b1, b2); surf
+    the scene's material.Surfaces; gs: the guide's state, whose mixture gives an offset the density
+    its own pixel's path tracer would, shift.path_density): reconnection (a visibility ray to test,
+    off.reconn) or half-vector copy (a ray to trace, off.trace); updates beta_o, R, and the offset's
+    last density. off.lights: whether the pair's weights for this bounce count the light techniques
+    (not after a half-vector copy, whose pairs take no NEE either: NEE reconnects, and both
+    techniques must map a path to the same partner)."""
+    prim = hits[1]
+    b1 = hits[2]
+    b2 = hits[3]
+    b_x = bb.x
+    b_prim = bb.prim
+    b_wo = bb.wo
+    b_wt = bb.wt
+    b_pdf = bb.pdf
+    b_delta = bb.delta
+    b_rough = bb.rough
+    o_alive = off.alive
+    o_status = off.status
+    o_beta = off.beta
+    o_R = off.R
+    o_x = off.x
+    o_prim = off.prim
+    o_wo = off.wo
+    o_pdf = off.pdf
+    o_delta = off.delta
+    o_dist2 = off.dist2
+    o_rough = off.rough
+    o_hv = off.hv
+    o_lights = off.lights
+    o_trace = off.trace
+    o_reconn = off.reconn
+    o_ray_o = off.ray_o
+    o_ray_d = off.ray_d
+    o_tmax = off.tmax
     for k in prange(active.shape[0]):
         i = active[k]
         p1 = prim[k]

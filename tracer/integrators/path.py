@@ -232,25 +232,17 @@ def shade_vertex(i, wray, tk, p, u1, u2, surf, lt, gs, ps, max_depth, rr_depth, 
 
 
 @kernel
-def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs,
-          ps, max_depth, rr_depth, nee,
-          beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open, prev_rec,
-          alive, next_o, next_d, sh_o, sh_d, sh_tmax, sh_L, has_shadow, record, rec_base,
-          r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0, r_beta, r_pb, r_radiance, r_prev,
-          r_direct, r_plight):
+def shade(active, ray_o, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr, record, rec_base, rec):
     """One bounce for every active path: emission, NEE sample, direction sample, roulette.
 
-    The parameters come in bundles, each splatted by trace_wave from one declared field list (the
-    kernel takes the arrays one by one: Numba 0.68 loses writes inside a parallel loop into arrays
-    that arrive in a tuple, docs/findings.md; tests/test_seams.py checks every name against its
-    bundle): the hits (t, prim, b1, b2) of entry k, whose ray is ray_o/ray_d[k] and whose path
-    slot is active[k]; surf the scene's material.Surfaces (whole: it is only read); lt the lights; gs the guide's GuideState
-    (empty: BSDF sampling); ps the wave's PrimarySamples; the limits max_depth, rr_depth and nee
-    (False: no light sampling; emission found by a path then counts in full, without MIS); the
+    Entry k's ray is ray_o/ray_d[k], its hit in hits = (t, prim, b1, b2), its path slot active[k];
+    surf the scene's material.Surfaces; lt the lights; gs the guide's GuideState (empty: BSDF
+    sampling); ps the wave's PrimarySamples; limits = (max_depth, rr_depth, nee) (nee False: no
+    light sampling; emission found by a path then counts in full, without MIS); state the
     wave.PathState of every slot (L_cam[i] gets the light the camera ray sees directly: the
-    emission at the first hit, or the environment if it escapes); the wave.Continuation of entry
-    k (its next ray) and its wave.ShadowRays (origin, unit direction, tmax, unoccluded value); the
-    record mode and base, and the guiding.records.Records fields (r_*).
+    emission at the first hit, or the environment if it escapes); cont the wave.Continuation of
+    entry k (its next ray) and shr its wave.ShadowRays (origin, unit direction, tmax, unoccluded
+    value); the record mode and base, and rec the guiding.records.Records.
 
     Records (record RECORD_ALL or RECORD_INDIRECT): the vertex of entry k goes to record
     rec_base + k of the r_* arrays (strategy -1 where nothing was sampled).
@@ -261,6 +253,48 @@ def shade(active, ray_o, ray_d, t, prim, b1, b2, surf, lt, gs,
     its record; or not at all (RECORD_INDIRECT). A record's `prev` is the record of the path's
     vertex before it (-1 at the first hit and after a delta vertex).
     """
+    t = hits[0]
+    prim = hits[1]
+    b1 = hits[2]
+    b2 = hits[3]
+    max_depth = limits[0]
+    rr_depth = limits[1]
+    nee = limits[2]
+    beta = state.beta
+    L = state.L
+    L_cam = state.L_cam
+    depth = state.depth
+    prev_pdf = state.prev_pdf
+    prev_delta = state.prev_delta
+    gain = state.gain
+    key = state.key
+    pix = state.pix
+    aov = state.aov
+    aov_open = state.aov_open
+    prev_rec = state.prev_rec
+    alive = cont.alive
+    next_o = cont.next_o
+    next_d = cont.next_d
+    sh_o = shr.o
+    sh_d = shr.d
+    sh_tmax = shr.tmax
+    sh_L = shr.L
+    has_shadow = shr.has
+    r_x = rec.x
+    r_n = rec.n
+    r_wi = rec.wi
+    r_pdf = rec.pdf
+    r_fcos = rec.fcos
+    r_strategy = rec.strategy
+    r_node = rec.node
+    r_path = rec.path
+    r_pixel = rec.pixel
+    r_L0 = rec.L0
+    r_beta = rec.beta
+    r_pb = rec.pb
+    r_prev = rec.prev
+    r_direct = rec.direct
+    r_plight = rec.plight
     for k in prange(active.shape[0]):
         i = active[k]
         if record != RECORD_NONE:
@@ -350,10 +384,10 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
             t0 = stats.tick("split", t0)
         if record > 0 and n_rec + n_active > rec.strategy.shape[0]:
             rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + n_active, 4 * n), n_rec)
-        shade(active[:n_active], ro, rd, *hits, ctx.surfaces, ctx.lights, ctx.guide_state, ps, *limits, *state,
-              *out, *shadow, record, n_rec, *rec)
+        shade(active[:n_active], ro, rd, hits, ctx.surfaces, ctx.lights, ctx.guide_state, ps, limits, state, out,
+              shadow, record, n_rec, rec)
         t0 = stats.tick("shade", t0)
-        n_next, ns = compact(active[:n_active], *out, *shadow, active2, buf.ray_o, buf.ray_d, *queue)
+        n_next, ns = compact(active[:n_active], out, shadow, (active2, buf.ray_o, buf.ray_d), queue)
         active, active2 = active2, active
         t0 = stats.tick("compact", t0)
         if ns:

@@ -37,20 +37,16 @@ COUNTS = 8  # counts' columns: rays, shadow rays, cycles of intersect, shade, oc
 
 
 @kernel
-def trace_paths(fi, fo, scene, plane, centre, refine, scratch, ray_o, ray_d, surf, lt, gs, ps,
-                max_depth, rr_depth, nee,
-                beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open, prev_rec,
-                split, outgoing, pixel_est, split_hi, split_low, threshold, parent, capacity, counts):
+def trace_paths(rtc, packet, ray_o, ray_d, surf, lt, gs, ps, limits, state, split, plan, parent, capacity, counts):
     """Trace paths 0 .. n-1 (n = len(ray_o); their first rays ray_o, ray_d, their wave.PathState
-    set by the source) to their end. fi, fo: the addresses of rtcIntersect16 and rtcOccluded16;
-    scene, plane, centre, refine: the EmbreeAccel's; scratch: one packet row per chunk (the
-    chunks are the parallel loop); surf, lt, gs, ps, the limits and the wave.PathState as
-    integrators.path.shade (prev_rec unused: nothing is recorded).
+    state set by the source) to their end. rtc: the addresses of rtcIntersect16 and rtcOccluded16;
+    packet: the EmbreeAccel's packet_args (scene, plane, centre, refine and scratch, one packet row
+    per chunk: the chunks are the parallel loop); surf, lt, gs, ps, the limits and the
+    wave.PathState state as integrators.path.shade (nothing is recorded: a copy's prev_rec is -1).
 
     With `split`, a path that hits a surface after its first bounce goes on as the number of
-    copies splitting.split_counts gives it (the SplitPlan's outgoing, pixel_est, split_hi,
-    split_low, threshold; 0 copies: the weight window ended it), as splitting.split_paths makes
-    them: each its own path slot (chunk c owns slots n + c (capacity - n) / chunks up to the
+    copies splitting.split_counts gives it (by the splitting.SplitPlan `plan`; 0 copies: the
+    weight window ended it), as splitting.split_paths makes them: each its own path slot (chunk c owns slots n + c (capacity - n) / chunks up to the
     next chunk's, and makes fewer copies where they run out), beta and gain divided among them,
     parent[slot] the path it adds into, waiting on a stack for a free lane, with its hit. Each
     chunk adds its copies' radiance into their parents, the latest first, before it ends.
@@ -58,6 +54,33 @@ def trace_paths(fi, fo, scene, plane, centre, refine, scratch, ray_o, ray_d, sur
     counts[c] gets chunk c's closest-hit rays, shadow rays, the processor cycles its intersect,
     shade and occluded steps took and all its work took, the copies it made and the paths the
     window ended (COUNTS)."""
+    fi = rtc[0]
+    fo = rtc[1]
+    scene = packet[0]
+    plane = packet[1]
+    centre = packet[2]
+    refine = packet[3]
+    scratch = packet[4]
+    max_depth = limits[0]
+    rr_depth = limits[1]
+    nee = limits[2]
+    beta = state.beta
+    L = state.L
+    L_cam = state.L_cam
+    depth = state.depth
+    prev_pdf = state.prev_pdf
+    prev_delta = state.prev_delta
+    gain = state.gain
+    key = state.key
+    pix = state.pix
+    aov = state.aov
+    aov_open = state.aov_open
+    prev_rec = state.prev_rec
+    outgoing = plan.outgoing
+    pixel_est = plan.pixel_est
+    split_hi = plan.hi
+    split_low = plan.low
+    threshold = plan.threshold
     n = ray_o.shape[0]
     nch = scratch.shape[0]
     LN = _LANES
@@ -255,9 +278,9 @@ def run(ctx, buf, n, ps, stats, split=None):
     counts = np.zeros((packet[-1].shape[0], COUNTS), np.int64)
     plan = split if split is not None else _NO_SPLIT
     with _NumbaThreads(accel.threads):
-        trace_paths(_INTERSECT16, _OCCLUDED16, *packet, buf.ray_o[:n], buf.ray_d[:n], ctx.surfaces, ctx.lights, ctx.guide_state, ps,
-                    ctx.max_depth, ctx.rr_depth, ctx.nee, *buf.path_state(), split is not None, plan.outgoing,
-                    plan.pixel_est, plan.hi, plan.low, plan.threshold, buf.parent, buf.capacity, counts)
+        trace_paths((_INTERSECT16, _OCCLUDED16), packet, buf.ray_o[:n], buf.ray_d[:n], ctx.surfaces, ctx.lights,
+                    ctx.guide_state, ps, (ctx.max_depth, ctx.rr_depth, ctx.nee), buf.path_state(), split is not None,
+                    plan, buf.parent, buf.capacity, counts)
     stats.rays += int(counts[:, 0].sum())
     stats.shadow_rays += int(counts[:, 1].sum())
     stats.split_copies += int(counts[:, 6].sum())

@@ -39,6 +39,7 @@ from ..._jit import jit, kernel
 from ...lights import DELTA_DIRECTIONAL, DELTA_POINT, sample_light, spot_value
 from ...material import adjoint_factor, crosses, surface_at
 from ...rng import P_DIR, P_LIGHT, P_POS, P_RR, photon_dim, photon_key, uniform
+from ...wave import Continuation
 from ...sampling import (
     dot,
     frame,
@@ -233,19 +234,38 @@ def emit(lt, tri, centre, radius, tri_eps, seed, iteration, g0, aim, key, o, d, 
 
 
 @kernel
-def scatter(active, d, t, prim, b1, b2, surf, gs, data_slot,
-            key, power, thr, depth, max_hits, rr_depth, alive, next_o, next_d,
-            dep_node, dep_bin, dep_val, dep_x, dep_n, first_hit, imp, p_imp):
+def scatter(active, d, hits, surf, gs, data_slot, photons, limits, cont, dep, imp):
     """One hit for every active photon: deposit, then sample the BSDF (importance mode) and roulette.
 
-    Entry k of the hit arrays belongs to photon active[k]; writes its deposit (dep_node -1 for
-    none) and its continuation (alive[k], next_o/next_d[k]). Photons deposit at their first hit
-    (direct light) only if `first_hit`. Guided light tracing: at a non-delta hit whose voxel has
-    an importance map in `imp` (a GuideState on gs's tree), the direction comes from that map with
-    probability p_imp, else from the BSDF, and the photon's weight is f |cos| / the mixture's pdf.
+    Entry k of the hits (t, prim, b1, b2) and of the rays' directions d belongs to photon active[k]
+    (its PhotonState in `photons`); writes its Deposits entry (node -1 for none) and its
+    wave.Continuation (alive[k], next_o/next_d[k]). limits = (max_hits, rr_depth, first_hit,
+    p_imp). Photons deposit at their first hit (direct light) only if `first_hit`. Guided light
+    tracing: at a non-delta hit whose voxel has an importance map in `imp` (a GuideState on gs's
+    tree), the direction comes from that map with probability p_imp, else from the BSDF, and the
+    photon's weight is f |cos| / the mixture's pdf.
     surf: the scene's material.Surfaces; with shading normals the weight carries Veach's adjoint
     correction (material.adjoint_factor) and is zero across the true surface (material.crosses).
     """
+    prim = hits[1]
+    b1 = hits[2]
+    b2 = hits[3]
+    key = photons.key
+    power = photons.power
+    thr = photons.thr
+    depth = photons.depth
+    max_hits = limits[0]
+    rr_depth = limits[1]
+    first_hit = limits[2]
+    p_imp = limits[3]
+    alive = cont.alive
+    next_o = cont.next_o
+    next_d = cont.next_d
+    dep_node = dep.node
+    dep_bin = dep.bin
+    dep_val = dep.val
+    dep_x = dep.x
+    dep_n = dep.n
     n = active.shape[0]
     for k in prange(n):
         i = active[k]
@@ -348,6 +368,25 @@ def compact_wave(m, alive, next_o, next_d, active, o, d, dep_node, dep_bin, dep_
     return na, nd
 
 
+class PhotonState(NamedTuple):
+    """Per photon of a wave: what scatter reads and updates."""
+
+    key: np.ndarray  # (n,) uint64 its random stream
+    power: np.ndarray  # (n, 3) float64 its power at emission
+    thr: np.ndarray  # (n, 3) float64 its throughput since
+    depth: np.ndarray  # (n,) int32 hits so far
+
+
+class Deposits(NamedTuple):
+    """Per wave entry: the deposit of its hit (node -1: none)."""
+
+    node: np.ndarray  # (m,) int64 guide voxel
+    bin: np.ndarray  # (m,) int64 direction bin of the voxel's map
+    val: np.ndarray  # (m,) float64 luminance of the photon's power
+    x: np.ndarray  # (m, 3) float64 where
+    n: np.ndarray  # (m, 3) float64 the normal on the side it arrived from
+
+
 class PhotonBuffers:
     def __init__(self, size):
         self.size = size
@@ -408,10 +447,11 @@ def trace_photons(ctx, gs, data_slot, n_photons, iteration, sink, wave_size=1 <<
             o, d = buf.ray_o[:m], buf.ray_d[:m]
             t, prim, b1, b2 = accel.intersect(o, d)
             rays += m
-            scatter(active[:m], d, t, prim, b1, b2, ctx.surfaces, gs, data_slot, buf.key, buf.power, buf.thr,
-                    buf.depth, max_hits, ctx.rr_depth, buf.alive[:m], buf.next_o[:m], buf.next_d[:m],
-                    buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m], buf.dep_n[:m], first_hit,
-                    imp, float(p_imp))
+            scatter(active[:m], d, (t, prim, b1, b2), ctx.surfaces, gs, data_slot,
+                    PhotonState(buf.key, buf.power, buf.thr, buf.depth), (max_hits, int(ctx.rr_depth), bool(first_hit),
+                                                                          float(p_imp)),
+                    Continuation(buf.alive[:m], buf.next_o[:m], buf.next_d[:m]),
+                    Deposits(buf.dep_node[:m], buf.dep_bin[:m], buf.dep_val[:m], buf.dep_x[:m], buf.dep_n[:m]), imp)
             entered[active[:m][buf.dep_node[:m] >= 0]] = True
             m, nd = compact_wave(m, buf.alive, buf.next_o, buf.next_d, active, buf.ray_o, buf.ray_d,
                                  buf.dep_node, buf.dep_bin, buf.dep_val, buf.dep_x, buf.dep_n)
