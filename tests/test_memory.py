@@ -49,6 +49,33 @@ def test_check_arithmetic():
     assert f"about {side}x{side} pixels" in str(e.value)
 
 
+def test_estimate_counts_the_environment_map(tmp_path):
+    """An environment map's sampling tables (built when the render starts) are in the estimate: a
+    32 x 32 render under a 512 x 1024 map allocates (tracemalloc) more than the estimate without
+    the map, so an estimate that leaves the map out fails, and no more than the estimate with it
+    (the map's image is held by the loaded scene, before the render)."""
+    import numpy as np
+
+    h, w = 512, 1024
+    img = (np.random.default_rng(1).random((h, w, 3)) + 0.01).astype(np.float32)
+    tracer.write_image(tmp_path / "env.exr", img)
+    scene = tracer.load_scene(scenes.sphere_under_sky(tmp_path, 0.5, 1.0, env={"map": "env.exr"}, width=32,
+                                                      height=32))
+    wave = 4096
+    tracer.render(scene, spp=1, wave_size=wave)  # compiled
+    gc.collect()
+    tracemalloc.start()
+    try:
+        r = tracer.render(scene, spp=1, wave_size=wave)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert r.stats["nonfinite_samples"] == 0
+    wave_bytes = WaveBuffers.bytes_for(wave)
+    assert memory.estimate(32 * 32, 0, wave_bytes)["total"] < peak <= memory.estimate(32 * 32, 0, wave_bytes,
+                                                                                     env_texels=h * w)["total"]
+
+
 METHODS = [("bsdf", {}), ("grid", {}), ("photon", {}), ("pss", {"guide_settings": {"train_seconds": 1.0}}),
            ("odis", {}), ("ppg", {}), ("gpt-l1", {}), ("gpt-l2", {})]
 

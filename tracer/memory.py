@@ -12,7 +12,9 @@ The estimate is per film pixel (the crop's pixels) plus what does not grow with 
   method holds beyond them (`Guide.pixel_bytes`: the films of its training passes, per-pixel
   maps);
 - fixed: the wave buffers (bytes per path, measured on the buffer classes themselves), the ray
-  accel and light tables (ACCEL_BYTES_PER_TRIANGLE) and the method's own (`Guide.fixed_bytes`).
+  accel and light tables (ACCEL_BYTES_PER_TRIANGLE), an environment map's sampling tables
+  (ENV_BYTES_PER_TEXEL; the map itself is held by the loaded scene) and the method's own
+  (`Guide.fixed_bytes`).
 
 The per-pixel figures are the peak resident memory measured by `python -m bench.memory` (the
 slope of peak RSS between two image sizes; docs/throughput.md) rounded up by about 25%;
@@ -27,6 +29,7 @@ GPT_PIXEL_BYTES = {"l1": 900, "l2": 900, "none": 900, "gradnet": 2400}  # RSS 46
 # gradnet_v2's weights 1897
 GPT_FIXED_BYTES = {"gradnet": 256 << 20}  # torch and the network (measured about 190 MB)
 ACCEL_BYTES_PER_TRIANGLE = 512  # measured 416: Embree's BVH and float32 vertices, normals, offsets
+ENV_BYTES_PER_TEXEL = 40  # measured 32 (lights.build_lights' tables and their temporaries, tracemalloc)
 HEADROOM = 0.9  # refuse a render that needs more than this share of the available memory
 
 
@@ -62,12 +65,13 @@ def available_bytes():
     return have
 
 
-def estimate(pixels, triangles, wave_bytes, guide=None, integrator=None):
+def estimate(pixels, triangles, wave_bytes, guide=None, integrator=None, env_texels=0):
     """{"per_pixel", "fixed", "total"} bytes of a render of `pixels` film pixels over `triangles`
-    triangles, with wave buffers of `wave_bytes`, by `guide` (a Guide, or None) and `integrator`
-    (an integrators.base.Integrator: its memory(); None: the path tracer's)."""
+    triangles and an environment map of `env_texels` texels (0: none), with wave buffers of
+    `wave_bytes`, by `guide` (a Guide, or None) and `integrator` (an integrators.base.Integrator:
+    its memory(); None: the path tracer's)."""
     per_pixel, fixed = integrator.memory() if integrator is not None else (PATH_PIXEL_BYTES, 0)
-    fixed += int(wave_bytes) + triangles * ACCEL_BYTES_PER_TRIANGLE
+    fixed += int(wave_bytes) + triangles * ACCEL_BYTES_PER_TRIANGLE + int(env_texels) * ENV_BYTES_PER_TEXEL
     if guide is not None:
         per_pixel += guide.pixel_bytes
         fixed += guide.fixed_bytes

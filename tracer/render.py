@@ -195,8 +195,10 @@ def check_memory(scene, crop, wave_size, spp, guide, integrator=None):
     wave_bytes = WaveBuffers.bytes_for(wave, split=guide is not None and guide.splits)
     if integrator is not None:
         wave_bytes += integrator.wave_bytes(wave)
+    env = scene.environment
+    texels = env.image.shape[0] * env.image.shape[1] if env is not None and env.image is not None else 0
     try:
-        memory.check(crop[2], crop[3], memory.estimate(npix, scene.n_triangles, wave_bytes, guide, integrator))
+        memory.check(crop[2], crop[3], memory.estimate(npix, scene.n_triangles, wave_bytes, guide, integrator, texels))
     except SettingsError as e:
         raise SettingsError(f"{scene.path}: {e}") from None
     return wave
