@@ -159,35 +159,44 @@ def _mean_over(s, rows, cols, n, h, w, coefficients):
 
 def bake(s, height=None):
     """(H, 2H, 3) float64 texel means of the radiance in world directions (module docstring), and
-    the number of texels whose value was negative in some channel (set to 0)."""
+    the number of texels whose value was negative in some channel (set to 0). Works a band of 128
+    rows at a time: beside the map, it holds a band's directions (at 2048 rows, 12 MB each)."""
     h = int(height or map_height(s))
     w = 2 * h
     coeff = sky_coefficients(s)
     img = np.zeros((h, w, 3))
     cov = np.zeros((h, w))
     cols = np.arange(w)
-    # the sky: its value at each texel's centre, a band of rows at a time
-    for y0 in range(0, h, 128):
-        ys = np.arange(y0, min(y0 + 128, h))
-        rows, cc = np.repeat(ys, w), np.tile(cols, len(ys))
-        sky, c = _mean_over(s, rows, cc, 1, h, w, coeff)
-        img[rows, cc], cov[rows, cc] = sky, c
-    # texels the horizon crosses (corners on both sides) and texels near the sun, sampled finely
     theta = math.pi * np.arange(h + 1) / h
     phi = 2.0 * math.pi * (np.arange(w + 1) / w - 0.5)
-    st = np.sin(theta)[:, None]
-    corners = np.stack([st * np.sin(phi)[None, :], np.broadcast_to(np.cos(theta)[:, None], (h + 1, w + 1)),
-                        -st * np.cos(phi)[None, :]], axis=-1)
     up = s.world_to_local[2] / np.linalg.norm(s.world_to_local[2])
     sun_w = s.world_to_local.T @ s.sun
     sun_w /= np.linalg.norm(sun_w)
-    above = corners @ up >= 0.0
-    horizon = (above[:-1, :-1] != above[1:, :-1]) | (above[:-1, :-1] != above[:-1, 1:]) | (above[:-1, :-1] != above[1:, 1:])
-    centre, _ = _texel_dirs(np.repeat(np.arange(h), w), np.tile(cols, h), 1, h, w)
-    ang = np.arccos(np.clip(centre.reshape(h, w, 3) @ sun_w, -1.0, 1.0))
-    near_sun = ang <= s.sun_half_aperture + 2.0 * math.pi / h  # a texel's diagonal is at most pi sqrt(2) / h
-    for mask, n in ((horizon & ~near_sun, 8), (near_sun, 16)):
-        ys, xs = np.nonzero(mask)
+    reach = s.sun_half_aperture + 2.0 * math.pi / h  # a texel's diagonal is at most pi sqrt(2) / h
+    fine = {8: [], 16: []}  # texels the horizon crosses (corners on both sides), texels near the sun
+    for y0 in range(0, h, 128):
+        y1 = min(y0 + 128, h)
+        ys = np.arange(y0, y1)
+        rows, cc = np.repeat(ys, w), np.tile(cols, len(ys))
+        # the sky: its value at each texel's centre
+        sky, c = _mean_over(s, rows, cc, 1, h, w, coeff)
+        img[rows, cc], cov[rows, cc] = sky, c
+        st = np.sin(theta[y0:y1 + 1])[:, None]
+        corners = np.stack([st * np.sin(phi)[None, :],
+                            np.broadcast_to(np.cos(theta[y0:y1 + 1])[:, None], (y1 - y0 + 1, w + 1)),
+                            -st * np.cos(phi)[None, :]], axis=-1)
+        above = corners @ up >= 0.0
+        horizon = ((above[:-1, :-1] != above[1:, :-1]) | (above[:-1, :-1] != above[:-1, 1:])
+                   | (above[:-1, :-1] != above[1:, 1:]))
+        centre, _ = _texel_dirs(rows, cc, 1, h, w)
+        near_sun = np.arccos(np.clip(centre.reshape(y1 - y0, w, 3) @ sun_w, -1.0, 1.0)) <= reach
+        for mask, n in ((horizon & ~near_sun, 8), (near_sun, 16)):
+            yy, xx = np.nonzero(mask)
+            fine[n].append((yy + y0, xx))
+    # those texels sampled finely, in 4096s
+    for n, parts in fine.items():
+        ys = np.concatenate([p[0] for p in parts])
+        xs = np.concatenate([p[1] for p in parts])
         for k in range(0, len(ys), 4096):
             sky, c = _mean_over(s, ys[k:k + 4096], xs[k:k + 4096], n, h, w, coeff)
             img[ys[k:k + 4096], xs[k:k + 4096]], cov[ys[k:k + 4096], xs[k:k + 4096]] = sky, c
@@ -196,9 +205,11 @@ def bake(s, height=None):
     got = float((cov * solid[:, None]).sum())
     if s.elevation > s.sun_half_aperture and got > 0.0:  # the whole disc above the horizon
         cov *= cone / got
-    img += cov[..., None] * sun_radiance(s)
+    rad = sun_radiance(s)
+    for c in range(3):
+        img[..., c] += cov * rad[c]
     negative = int(np.count_nonzero((img < 0.0).any(axis=-1)))
-    return np.maximum(img, 0.0), negative
+    return np.maximum(img, 0.0, out=img), negative
 
 
 # --- the sun's position from a date, time and place (Blanco-Muriel et al. 2001, as Mitsuba) -------
