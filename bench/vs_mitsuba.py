@@ -146,10 +146,19 @@ def mitsuba_copy(path, folder, allow_missing=False, size=None):
 def _sunsky_06(el, path):
     """Rewrite a 0.6 `sunsky` element in place into Mitsuba 3's terms, as tracer.readers.mitsuba
     reads it: sunRadiusScale as sun_aperture, 0.6's albedo default, `scale` into both scales, 0.6's
-    +y-up frame as a to_world, a date/time/place as the sun's direction (0.6's formula)."""
+    +y-up frame as a to_world, a date/time/place as the sun's direction (0.6's formula). The
+    reader's warnings are not logged here: the tracer's own load of the scene logs them once."""
+    import logging
+
     from tracer.readers.mitsuba import read_sunsky
 
-    sky = read_sunsky(path)
+    log = logging.getLogger("tracer")
+    was = log.disabled
+    log.disabled = True
+    try:
+        sky = read_sunsky(path)
+    finally:
+        log.disabled = was
     names = {c.get("name"): c for c in el if c.get("name") is not None}
     keep = {"turbidity", "skyScale", "sunScale", "albedo"}
     scale = names.get("scale")
