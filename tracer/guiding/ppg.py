@@ -260,15 +260,9 @@ class _Outgoing:
         n = child.size
         if n <= self.n_nodes:
             return
-        self.out_sum = np.concatenate([self.out_sum, np.zeros(n - self.n_nodes)])
-        self.out_n = np.concatenate([self.out_n, np.zeros(n - self.n_nodes)])
+        self.out_sum = _inherited(_grown(self.out_sum, n, 0.0), child, old, 0.5)
+        self.out_n = _inherited(_grown(self.out_n, n, 0.0), child, old, 0.5)
         self.n_nodes = n
-        for i in np.flatnonzero(child >= 0):
-            c = child[i]
-            if c >= old:
-                for j in (c, c + 1):
-                    self.out_sum[j] = 0.5 * self.out_sum[i]
-                    self.out_n[j] = 0.5 * self.out_n[i]
 
 
 def _grown(alpha, n, fill):
@@ -276,12 +270,13 @@ def _grown(alpha, n, fill):
     return alpha if alpha.size >= n else np.concatenate([alpha, np.full(n - alpha.size, fill)])
 
 
-def _inherited(alpha, child, old):
-    """alpha with the nodes made by the last split (index `old` on) given their parent's weight
-    (children are appended after their parent, so one pass in index order reaches grandchildren)."""
-    out = alpha.copy()
+def _inherited(values, child, old, share=1.0):
+    """`values` (per SD-tree node) with the nodes made by the last split (index `old` on) given
+    `share` times their parent's value (children are appended after their parent, so one pass in
+    index order reaches grandchildren)."""
+    out = values.copy()
     for i in np.flatnonzero(child >= 0):
         c = child[i]
         if c >= old:
-            out[c] = out[c + 1] = out[i]
+            out[c] = out[c + 1] = share * out[i]
     return out
