@@ -149,17 +149,33 @@ def make_copy(i, s, j, beta, gain, L, depth, prev_pdf, prev_delta, key, pix, pre
 
 
 @jit
-def split_paths(active, ks, t, prim, b1, b2, t2, prim2, b12, b22, ray_o, ray_d, beta, gain, L, depth, prev_pdf,
-                prev_delta, key, pix, prev_rec, parent, n_slots, capacity):
+def split_paths(active, ks, hits, hits2, ray_o, ray_d, state, parent, n_slots, capacity):
     """Apply split_counts: entries with ks 0 leave the wave (their paths end; what they gathered
     stays in L); entry k's path becomes ks[k] copies with beta / ks[k] and gain / ks[k] each (so
     Russian roulette, which looks at beta / gain, treats them as it would the path), fewer where
     fewer than ks[k] - 1 path slots or wave entries are left below `capacity`. The kept entries'
-    rays and hits (t, prim, b1, b2 into t2, prim2, b12, b22, which have room for the copies) move
+    rays and hits (hits = (t, prim, b1, b2) into hits2, which has room for the copies) move
     to the front; copies take path slots from n_slots on and the entries after the kept ones, with
     the entry's ray and hit, L = 0, a key of their own, and parent = the path whose sample they add
     to. Returns (entries, path slots) in use. Sequential: slots are handed out in order, so a render
-    does not depend on the thread count."""
+    does not depend on the thread count. state: the wave.PathState."""
+    t = hits[0]
+    prim = hits[1]
+    b1 = hits[2]
+    b2 = hits[3]
+    t2 = hits2[0]
+    prim2 = hits2[1]
+    b12 = hits2[2]
+    b22 = hits2[3]
+    beta = state.beta
+    gain = state.gain
+    L = state.L
+    depth = state.depth
+    prev_pdf = state.prev_pdf
+    prev_delta = state.prev_delta
+    key = state.key
+    pix = state.pix
+    prev_rec = state.prev_rec
     n_active = ks.shape[0]
     e = 0
     for k in range(n_active):
@@ -314,9 +330,8 @@ def split_wave(buf, active, n_active, n_slots, hits, rd, ctx, plan, stats):
     if wanted == n_active and ended == 0:
         return n_active, n_slots, hits
     hit2 = buf.copy_hits(t, prim, b1, b2)
-    n_e, n_s = split_paths(active, ks, t, prim, b1, b2, *hit2, buf.ray_o, buf.ray_d, buf.beta, buf.gain, buf.L,
-                           buf.depth, buf.prev_pdf, buf.prev_delta, buf.key, buf.pix, buf.prev_rec, buf.parent,
-                           n_slots, buf.capacity)
+    n_e, n_s = split_paths(active, ks, hits, hit2, buf.ray_o, buf.ray_d, buf.path_state(), buf.parent, n_slots,
+                           buf.capacity)
     stats.split_copies += n_s - n_slots
     stats.window_ended += ended
     return n_e, n_s, tuple(a[:n_e] for a in hit2)
@@ -331,8 +346,7 @@ def warm_up_splitting(ctx):
     e = (np.zeros(1), np.full(1, -1, np.int32), np.zeros(1), np.zeros(1))
     split_counts(buf.active[:1], buf.ray_d[:1], e, ctx.scene.tri, ctx.tri_normal, buf.path_state(), ctx.guide_state,
                  SplitPlan(1.0, np.zeros(1), np.ones(1), 1.0, 0.1), ks)
-    split_paths(buf.active, ks, *e, *e, buf.ray_o, buf.ray_d, buf.beta, buf.gain, buf.L, buf.depth, buf.prev_pdf,
-                buf.prev_delta, buf.key, buf.pix, buf.prev_rec, buf.parent, 1, buf.capacity)
+    split_paths(buf.active, ks, e, e, buf.ray_o, buf.ray_d, buf.path_state(), buf.parent, 1, buf.capacity)
     merge_copies(buf.L, buf.parent, 1, 1)
     _outgoing_stats(np.zeros(1, np.int32), np.zeros(1, np.int8), np.zeros(1, np.int64), np.zeros(1, np.float32),
                     np.zeros(1), np.zeros(1))
