@@ -488,7 +488,14 @@ def test_summary_says_when_a_guide_trained_fewer_iterations(tmp_path, capsys):
 
 def test_unknown_accel_and_option(capsys):
     fails_with(capsys, [CORNELL, "--accel", "optix"], "unknown accel 'optix'", "embree", "numba")
+    fails_with(capsys, [CORNELL, "--path-loop", "warp"], "unknown path loop 'warp'", "thread", "lanes")
     fails_with(capsys, [CORNELL, "--frobnicate"], "--frobnicate")
+
+
+def test_path_loop_lanes(tmp_path, capsys):
+    """--path-loop lanes reaches the render: the Cornell box's samples all run on the lanes."""
+    _, stats, _ = render_cli(capsys, tmp_path, "lanes", "--path-loop", "lanes")
+    assert stats["path_loop"] == "lanes" and stats["lane_samples"] == stats["samples"] > 0
 
 
 def test_output_folder_is_created(tmp_path, capsys):

@@ -67,6 +67,10 @@ def _parser():
     p.add_argument("--allow-missing", action="store_true",
                    help="render a Mitsuba scene XML whose meshes or textures are partly absent (warnings)")
     p.add_argument("--accel", default="embree", help=f"ray queries: {' or '.join(ACCELS)} (default embree)")
+    p.add_argument("--path-loop", default="thread", metavar="LOOP",
+                   help="thread (default: each thread's packets of paths to their end), wave (one kernel per stage) "
+                        "or lanes (float32 lanes, tracer.engine: plain path tracing of diffuse scenes lit by area "
+                        "lights; the rest runs on thread)")
     p.add_argument("--filter", default="box", help="pixel filter: box (default) or point (pixel centres)")
     p.add_argument("--crop", help="render only the window x0,y0,w,h of the image")
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
@@ -240,7 +244,7 @@ def _list_integrators():
                   INTEGRATORS)
 
 
-def _compile_notice(guide, integ, accel):
+def _compile_notice(guide, integ, accel, path_loop):
     """One line before a render whose kernels are not in Numba's cache yet (a guess; see
     _jit.kernels_cached and render.compile_plan), so that minutes of silence do not look like a
     hang. (render() logs the same line for a library user; the CLI drops that record.)"""
@@ -249,7 +253,7 @@ def _compile_notice(guide, integ, accel):
     from .render import COMPILE_NOTE, compile_plan
 
     guided = guide in REGISTRY and REGISTRY[guide][0] is not None
-    if not _jit.kernels_cached(*compile_plan(guided, integ, accel)):
+    if not _jit.kernels_cached(*compile_plan(guided, integ, accel, path_loop)):
         _note(COMPILE_NOTE)
 
 
@@ -289,7 +293,7 @@ class _Warnings(logging.Handler):
 
 def _run(argv, warnings):
     from . import metrics
-    from .render import DEFAULT_WAVE, _check_crop, check_memory, render, write_outputs
+    from .render import DEFAULT_WAVE, PATH_LOOPS, _check_crop, check_memory, render, write_outputs
     from .scene import load_scene
 
     args = _parser().parse_args(_denoise_quality(argv))
@@ -325,6 +329,8 @@ def _run(argv, warnings):
 
     if args.accel not in ACCELS:
         raise unknown_name("accel", args.accel, ACCELS)
+    if args.path_loop not in PATH_LOOPS:
+        raise unknown_name("path loop", args.path_loop, PATH_LOOPS)
     # unknown names and settings fail here, before the scene loads
     guide_name, guide_settings = parse_spec(args.guide)
     guide_settings.update(parse_settings(args.guide_opt, "--guide-opt"))
@@ -353,7 +359,7 @@ def _run(argv, warnings):
 
     def compile_notice():
         if notice[0]:
-            _compile_notice(guide_name, integ, args.accel)
+            _compile_notice(guide_name, integ, args.accel, args.path_loop)
             notice[0] = False
 
     scene = load_scene(args.scene, before_framing=compile_notice, define=define or None,
@@ -378,7 +384,7 @@ def _run(argv, warnings):
     result = render(scene, spp=args.spp, time=args.time, guide=guide_name, guide_settings=guide_settings,
                     max_depth=args.max_depth,
                     rr_depth=args.rr_depth, seed=args.seed, accel=args.accel, threads=args.threads,
-                    pixel_filter=args.filter, crop=crop,
+                    pixel_filter=args.filter, crop=crop, path_loop=args.path_loop,
                     wave_size=args.wave_size or DEFAULT_WAVE, progress=not args.quiet, integrator=integ,
                     denoise=args.denoise or False, scheduler=args.scheduler, workers=args.workers,
                     segments_dir=(args.segments_dir or os.path.splitext(out)[0] + ".segments") if dask else None)

@@ -41,7 +41,7 @@ from .wave import Stats, WaveBuffers
 DEFAULT_WAVE = 1 << 16
 log = logging.getLogger("tracer")
 FILTERS = ("box", "point")
-PATH_LOOPS = ("thread", "wave")
+PATH_LOOPS = ("thread", "wave", "lanes")
 
 
 def _check_crop(crop, width, height):
@@ -83,6 +83,9 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     path_loop  "thread" (default): passes that record and split nothing trace each thread's paths to
                their end in packets of 16 (tracer.integrators.thread_loop; Embree only); "wave": every
                pass runs the wavefront, one kernel per stage. The images are the same bit for bit.
+               "lanes": plain path tracing on float32 lanes (tracer.engine), where the scene allows
+               (diffuse materials, area lights); other scenes and passes take the per-thread loop.
+               Its images are equal in expectation, with other random numbers.
     denoise    True (or a quality: "high", the default, "balanced", "fast"): Intel Open Image Denoise
                on the final image with its albedo and normal (tracer.denoise; needs the `denoise`
                extra) into result.denoised; its time counts in time_total and in a time budget
@@ -272,6 +275,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     t_setup = _time.perf_counter() - t_start
     ctx = RenderContext(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter, crop, integ.nee)
     ctx.path_loop = path_loop
+    if path_loop == "lanes" and (gaps := engine_gaps(acc.name, g is not None)):
+        log.warning("path_loop lanes: not with %s; the render runs on the other path loops", ", ".join(gaps))
     # Trace throwaway paths first: they compile the kernels the render will run (or load them from
     # the cache), so that neither the time budget nor the stats count Numba's compile. Recorded
     # paths (a guide's training) run the wavefront, the rest the per-thread loop; a render that
@@ -378,15 +383,24 @@ def _warm_up(ctx, g, splits, integ, kernels, crop):
     integ.warm_up(ctx)
 
 
+def engine_gaps(accel, guided):
+    """What keeps a render's passes off the lanes of tracer.engine (path_loop="lanes"): short reasons."""
+    if accel != "embree":
+        return [f"the {accel} accel (the lanes need Embree)"]
+    return ["a guide (its passes run on the per-thread loop)"] if guided else []
+
+
 def compile_plan(guided, integ, accel, path_loop="thread"):
     """The kernels ("module.function") a render's warm-up compiles: the integrator's, the
     wavefront's where a guide records paths or the per-thread loop cannot run (another accel,
     path_loop="wave"), and the guides' photon tracer. What _jit.kernels_cached checks before a
     render, to say that a compile is coming."""
     names = list(integ.kernels())
-    if guided or (("thread_loop.trace_paths" in names) and (accel != "embree" or path_loop != "thread")):
+    if path_loop == "lanes" and not guided and "thread_loop.trace_paths" in names and accel == "embree":
+        names += ["lanes.shade", "lanes.shade_general"]
+    if guided or (("thread_loop.trace_paths" in names) and (accel != "embree" or path_loop == "wave")):
         names = [n for n in names if n != "thread_loop.trace_paths"] + ["path.shade"]
-        if guided and accel == "embree" and path_loop == "thread":
+        if guided and accel == "embree" and path_loop != "wave":
             names.append("thread_loop.trace_paths")
         if guided:
             names.append("photons.scatter")
@@ -455,6 +469,8 @@ def _stats(scene, stats, passes, spp, t_setup, t_start, t_render, settings, t_co
         "mrays_per_s": rays / elapsed / 1e6 if elapsed > 0 else 0.0,
         "nonfinite_samples": int(stats.nonfinite),
         "split_copies": int(stats.split_copies),
+        "lane_samples": int(stats.lane_samples),
+        "lane_general_vertices": int(stats.lane_general),
         "window_ended": int(stats.window_ended),
         **settings,
         "texture_memory_bytes": scene.textures.nbytes if len(scene.textures) else 0,

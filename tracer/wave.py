@@ -252,6 +252,8 @@ class Stats:
         self.samples = 0
         self.nonfinite = 0
         self.split_copies = 0
+        self.lane_samples = 0  # samples traced on the lanes of tracer.engine
+        self.lane_general = 0  # ... the vertices of theirs that its general kernel shaded
         self.window_ended = 0
 
     def tick(self, stage, t0):

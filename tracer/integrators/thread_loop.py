@@ -28,7 +28,7 @@ from ..bvh.embree import (_INTERSECT16, _LANES, _OCCLUDED16, _VALID, call4, clea
 from ..bvh.numba_bvh import _NumbaThreads
 from ..splitting import make_copy, split_count, throughput_plan
 from ..wave import TRACE_PARTS
-from .path import shade_vertex
+from ..engine.vertex import shade_vertex
 
 _NO_SPLIT = throughput_plan(0.0)
 
@@ -265,8 +265,9 @@ def trace_paths(rtc, packet, ray_o, ray_d, surf, lt, gs, ps, limits, state, spli
 
 
 def usable(ctx, record):
-    """Whether a wave can take the per-thread loop: Embree, nothing recorded (it may split)."""
-    return ctx.path_loop == "thread" and ctx.accel.name == "embree" and not record
+    """Whether a wave can take the per-thread loop: Embree, nothing recorded (it may split); with
+    path_loop "lanes", the waves the lanes cannot take."""
+    return ctx.path_loop in ("thread", "lanes") and ctx.accel.name == "embree" and not record
 
 
 def run(ctx, buf, n, ps, stats, split=None):

@@ -1,0 +1,104 @@
+"""The lane engine (tracer.engine, render(path_loop="lanes")) against the per-thread loop.
+
+The lanes draw other random numbers than the per-thread loop (a 32-bit hash), so their images
+agree in expectation, not bit for bit: z-tests of the image mean and of 6x6-pixel block means,
+each side's variance from its own film. They detect a bias of about 4 standard errors of a block
+mean (a few percent at 64 spp) anywhere in the image, and far smaller ones in the whole image's
+mean: a missing cosine or MIS weight, a light chosen with another probability than its pdf says,
+a shadow ray credited to the wrong lane, a lane lost or traced twice by the compaction. The
+per-thread loop itself is checked against the wavefront bit for bit (test_thread_loop.py) and
+the wavefront against analytic answers and Mitsuba 3.
+"""
+import logging
+import os
+
+import numpy as np
+import pytest
+
+import tracer
+from tracer.engine.lanes import alias_table
+from tracer.testing.stats import assert_clean, assert_z, image_mean
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BLOCK = 6
+
+
+def _scene(name, size=48):
+    return tracer.load_scene(os.path.join(ROOT, "scenes", name, f"{name}.obj"), width=size, height=size)
+
+
+def _blocks(a):
+    """Means over BLOCK x BLOCK pixels, (H/BLOCK * W/BLOCK, 3)."""
+    h, w = a.shape[0] // BLOCK, a.shape[1] // BLOCK
+    return a[: h * BLOCK, : w * BLOCK].reshape(h, BLOCK, w, BLOCK, 3).mean(axis=(1, 3)).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("name, kw, general", [
+    ("cornell", dict(max_depth=8, rr_depth=2), False),  # roulette from the second bounce: compaction at every depth
+    ("ajar", dict(max_depth=-1), False),  # unlimited depth, an area light behind a door
+    ("manylights", dict(max_depth=4), False),  # 48 lights of different powers: the alias table
+    ("cornell", dict(max_depth=3, integrator="path:nee=0"), False),  # emission found in full, no shadow rays
+    ("glossy", dict(max_depth=6), True),  # a mirror and metals beside diffuse walls: both classes in one path
+    ("window", dict(max_depth=5), True),  # an environment: every vertex general
+    ("spotlit", dict(max_depth=4), True),  # point and spot lights
+])
+def test_lanes_equal_the_per_thread_loop_in_expectation(name, kw, general):
+    """Image mean and block means of the lanes against the per-thread loop (independent seeds)."""
+    scene = _scene(name)
+    a = tracer.render(scene, spp=64, seed=1, path_loop="lanes", **kw)
+    b = tracer.render(scene, spp=64, seed=2, path_loop="thread", **kw)
+    assert_clean(a, "lanes")
+    assert_clean(b, "thread")
+    assert a.stats["lane_samples"] == a.stats["samples"] > 0, "some pass did not run on the lanes"
+    assert b.stats["lane_samples"] == 0
+    assert (a.stats["lane_general_vertices"] > 0) == general
+    ma, va = image_mean(a)
+    mb, vb = image_mean(b)
+    assert_z(ma, va + vb, mb, what=f"{name}: image mean, lanes against thread")
+    n = BLOCK * BLOCK
+    ia, ib = a.image.astype(np.float64), b.image.astype(np.float64)
+    vpa, vpb = a.variance.astype(np.float64), b.variance.astype(np.float64)
+    var = (_blocks(vpa) + _blocks(vpb)) / n  # the variance of a block mean: the pixels' mean variance / n
+    keep = var > 0
+    assert keep.sum() > 0.5 * keep.size
+    assert_z(_blocks(ia)[keep], var[keep], _blocks(ib)[keep], what=f"{name}: {BLOCK}x{BLOCK} block means")
+
+
+def test_lanes_aovs_are_the_first_hits():
+    """With the same seed the camera rays are the same on both loops, so the AOVs are equal to the
+    lanes' float32: the reflectance as stored, the normal and distance of Embree's hit (no float64
+    refinement on the lanes). A hit on another triangle changes some albedo by far more."""
+    scene = _scene("cornell", 32)
+    a = tracer.render(scene, spp=4, seed=3, path_loop="lanes", max_depth=3)
+    b = tracer.render(scene, spp=4, seed=3, path_loop="thread", max_depth=3)
+    np.testing.assert_allclose(a.aovs["albedo"], b.aovs["albedo"], rtol=1e-6)
+    np.testing.assert_allclose(a.aovs["normal"], b.aovs["normal"], atol=1e-6)
+    np.testing.assert_allclose(a.aovs["depth"], b.aovs["depth"], rtol=1e-4)
+
+
+def test_a_render_the_lanes_cannot_take_runs_on_the_other_loops(caplog):
+    """The Numba BVH (the lanes trace through Embree): one warning names the gap, and the image is
+    the wavefront's bit for bit."""
+    scene = _scene("cornell", 24)
+    with caplog.at_level(logging.WARNING, logger="tracer"):
+        a = tracer.render(scene, spp=2, path_loop="lanes", max_depth=3, accel="numba")
+    b = tracer.render(scene, spp=2, path_loop="wave", max_depth=3, accel="numba")
+    gaps = [r.getMessage() for r in caplog.records if "path_loop lanes" in r.getMessage()]
+    assert len(gaps) == 1 and "numba accel" in gaps[0], gaps
+    assert a.stats["lane_samples"] == 0
+    np.testing.assert_array_equal(a.image, b.image)
+
+
+def test_alias_table_keeps_the_distribution():
+    """Column j keeps itself with prob[j] and else gives its alias: each outcome's total over the
+    uniform column choice is its probability, to rounding (written out here, not sampled)."""
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 7, 300):
+        p = rng.random(n) ** 3
+        p /= p.sum()
+        prob, alias = alias_table(p)
+        got = np.zeros(n)
+        np.add.at(got, np.arange(n), prob / n)
+        np.add.at(got, alias, (1.0 - prob) / n)
+        np.testing.assert_allclose(got, p, rtol=1e-9, atol=1e-15)
+        assert np.all((prob >= 0.0) & (prob <= 1.0 + 1e-12))

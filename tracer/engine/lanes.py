@@ -1,0 +1,710 @@
+"""A wave of paths as float32 lanes: rows of float32 and int32 matrices, [field, lane].
+
+The lane state is declared once (FLOAT_ROWS, INT_ROWS, FLAG_ROWS): `LaneBuffers` allocates it
+from the declaration, and `compact` copies a lane by copying every row, so a new field is one
+name here. A bounce runs these kernels over lanes 0 .. m-1:
+
+- `intersect`: closest hits, 16 lanes to one rtcIntersect16 (Embree's float32 hit, no float64
+  refinement: the hit point is rebuilt from the barycentrics, on the triangle's plane);
+- `classify`: which lanes' vertices are of the fast class (a diffuse triangle without textures,
+  opacity or vertex normals, in a scene lit by triangles only; or an escape with no environment),
+  their AOVs and L_cam; the others listed for the general kernel;
+- `shade`: the fast class, one `prange` over the lanes that LLVM packs 8 or 16 to an instruction
+  (the body holds no helper that takes arrays and no `and` chain, integers stay 32-bit:
+  docs/throughput.md; the other lanes keep what the general kernel reads): emission with its
+  MIS weight, a light sample with MIS (alias table, a point uniform on the triangle), a cosine
+  bounce, the roulette;
+- `shade_general`: the listed lanes, each through engine.vertex.shade_vertex in float64 (every
+  material, texture and light), its results written into the lanes;
+- `occlude`: the shadow rays of both, packed 16 to one rtcOccluded16, adding the unblocked ones;
+- `compact`: the ended paths' radiance out to the wave's path slots (float64), and the lanes
+  that go on moved into the holes they left, so that lanes 0 .. m-1 hold the m paths left.
+
+Positions are relative to the accel's centre, as Embree holds the scene. The fast class draws its
+random numbers from a 32-bit hash of the path's key folded to 32 bits and the dimension
+(tracer.rng's layout of a bounce's dimensions), the general kernel from the key itself as the
+other path loops do: the images agree with theirs in expectation, not bit for bit
+(tests/test_engine.py z-tests them).
+
+What a wave needs to run here (`usable`): the path integrator's plain passes (no guide, no
+records, no splitting, no primary samples) and Embree.
+"""
+import math
+import time
+
+import numpy as np
+from numba import prange
+
+from .._jit import jit, kernel
+from ..bsdfs import DIFFUSE, ONE_SIDED, P_CLEAR, P_FLAGS, P_KD
+from ..bvh.embree import _INTERSECT16, _LANES, _OCCLUDED16, _VALID, call4
+from ..bvh.numba_bvh import _NumbaThreads
+from ..lights import ENV_NONE
+from ..wave import TRACE_PARTS
+from .vertex import MAX_BOUNCES, shade_vertex
+
+# The lane state, declared once: rows of the float32 and int32 matrices. The ray (origin relative
+# to the accel's centre, unit direction), the throughput, the radiance so far, the density of the
+# last sampled direction; the wave's path slot, the bounces so far, the 32-bit key, whether the
+# last direction came from a delta lobe (or the camera).
+FLOAT_ROWS = ("ox", "oy", "oz", "dx", "dy", "dz", "br", "bg", "bb", "lr", "lg", "lb", "pdf")
+INT_ROWS = ("slot", "depth", "key", "delta")
+OX, OY, OZ, DX, DY, DZ, BR, BG, BB, LR, LG, LB, PDF = range(len(FLOAT_ROWS))
+SLOT, DEPTH, KEY, DELTA = range(len(INT_ROWS))
+# A bounce's flags (int32): the path goes on, it has a shadow ray. (Whether the vertex is of the
+# fast class is an array of its own, LaneBuffers.fast: the fast kernel reads it, and a loop that
+# reads one row of an array and writes others is left scalar by LLVM.)
+FLAG_ROWS = ("alive", "shadow")
+ALIVE, SHADOW = range(len(FLAG_ROWS))
+# A bounce's shadow rays: origin, unit direction, tmax, the value it adds if unblocked
+SHADOW_ROWS = ("sox", "soy", "soz", "sdx", "sdy", "sdz", "tmax", "sr", "sg", "sb")
+SOX, SOY, SOZ, SDX, SDY, SDZ, TMAX, SR, SG, SB = range(len(SHADOW_ROWS))
+# The scene's rows per triangle: tl (TL_SEL, TL_AREA, TL_EPS, TL_ONE_SIDED, TL_FAST)
+TL_SEL, TL_AREA, TL_EPS, TL_ONE_SIDED, TL_FAST = range(5)
+
+# Rows are this many lanes longer than they need be: rows a power of two long lie a multiple of
+# 4 KiB apart, and a loop that touches 13 of them at once then maps them to the same cache sets
+# (measured on the start kernel: 27 ns a lane unpadded, 5 ns padded)
+PAD = 16
+_CHUNKS = 64  # compaction: chunks counted, then written at their offsets
+
+F = np.float32
+U32 = np.uint32
+ZERO, ONE = F(0.0), F(1.0)
+INV_PI = F(1.0 / math.pi)
+HALF_PI = F(0.5 * math.pi)
+INV24 = F(2.0 ** -24)
+SHORT = F(1.0 - 1e-3)  # a shadow ray ends this fraction of the way to its light point
+TINY = F(1e-20)
+# Taylor coefficients of sin and cos on [0, pi/2] (errors below 4e-6 and 5e-7 there)
+S3, S5, S7, S9, S11 = (F(-1.0 / 6.0), F(1.0 / 120.0), F(-1.0 / 5040.0), F(1.0 / 362880.0), F(-1.0 / 39916800.0))
+C2, C4, C6, C8, C10 = (F(-0.5), F(1.0 / 24.0), F(-1.0 / 720.0), F(1.0 / 40320.0), F(-1.0 / 3628800.0))
+_GOLDEN32, _FM1, _FM2 = U32(0x9E3779B9), U32(0x85EBCA6B), U32(0xC2B2AE35)
+_S16, _S13, _S8 = U32(16), U32(13), U32(8)
+# tracer.rng's dimensions of bounce k: BOUNCE + BLOCK k + slot (direction 0, 1; light 4; its point 5, 6; roulette 7)
+BOUNCE, BLOCK = 2, 8
+D_DIR, D_LIGHT, D_POS, D_RR = 0, 4, 5, 7
+# lim's entries
+L_RR, L_MAX, L_NEE, L_LIGHTS = range(4)
+
+
+@jit(inline="always")
+def rand32(key, dim):
+    """float32 in [0, 1): the top 24 bits of MurmurHash3's finaliser of key + (dim + 1) x golden
+    (SplitMix's sequence in 32 bits), every integer kept 32-bit so that LLVM packs 8 or 16 lanes."""
+    x = U32(U32(key) + U32(U32(dim + 1) * _GOLDEN32))
+    x = U32(U32(x ^ (x >> _S16)) * _FM1)
+    x = U32(U32(x ^ (x >> _S13)) * _FM2)
+    x = U32(x ^ (x >> _S16))
+    return F(np.int32(x >> _S8)) * INV24
+
+
+@jit(inline="always")
+def sincos2pi(u):
+    """(cos, sin) of 2 pi u for u in [0, 1): the quadrant from 4u, then Taylor polynomials on [0, pi/2)."""
+    v = u * F(4.0)
+    q = min(np.int32(v), np.int32(3))
+    a = (v - F(q)) * HALF_PI
+    a2 = a * a
+    s = a * (ONE + a2 * (S3 + a2 * (S5 + a2 * (S7 + a2 * (S9 + a2 * S11)))))
+    c = ONE + a2 * (C2 + a2 * (C4 + a2 * (C6 + a2 * (C8 + a2 * C10))))
+    cq = c if q == 0 else (-s if q == 1 else (-c if q == 2 else s))
+    sq = s if q == 0 else (c if q == 1 else (-s if q == 2 else -c))
+    return cq, sq
+
+
+class LaneBuffers:
+    """The lanes of waves of up to `size` paths, made from the declaration: the state (f, i), a
+    bounce's hits and shadow rays, the compaction's scratch."""
+
+    def __init__(self, size):
+        self.size = size
+        self.f = _rows(len(FLOAT_ROWS), size, F)
+        self.i = _rows(len(INT_ROWS), size, np.int32)
+        self.hole = np.zeros(size, np.int32)
+        self.mover = np.zeros(size, np.int32)
+        self.hit = _rows(3, size, F)  # t, b1, b2
+        self.prim = np.zeros(size, np.int32)
+        self.flags = _rows(len(FLAG_ROWS), size, np.int32)
+        self.shadow = _rows(len(SHADOW_ROWS), size, F)
+        self.fast = np.zeros(size, np.int32)  # the lane's vertex is of the fast class
+        self.general = np.zeros(size, np.int32)  # the lanes the general kernel shades
+
+
+def _rows(rows, n, dtype):
+    """(rows, n + PAD) zeros: rows for n lanes, a padded stride apart (PAD)."""
+    return np.zeros((rows, n + PAD), dtype)
+
+
+def _as_rows(a, dtype):
+    """The (rows, n) array `a` as padded rows (_rows) of `dtype`, its values in the first n columns."""
+    out = _rows(a.shape[0], a.shape[1], dtype)
+    out[:, : a.shape[1]] = a
+    return out
+
+
+class LaneScene:
+    """The scene as the lanes read it, float32 rows per triangle (padded: _rows): tri (9, F) v0 - centre, e1, e2;
+    nrm (3, F) unit geometric normal; alb (3, F) diffuse reflectance; emit (3, F) radiance; tl (5, F)
+    NEE's probability of choosing the triangle, its area, its ray offset, 1 if one-sided, 1 if its
+    vertices are of the fast class (fast_triangles); the alias table over the emissive triangles
+    (alias_p: the probability of keeping column j; alias_i (2, columns): column j's triangle and its
+    alias's); escape_fast: an escaped path ends with nothing to add (no environment)."""
+
+    def __init__(self, scene, surf, lt, centre):
+        v = surf.tri - centre
+        self.tri = _as_rows(np.concatenate([v[:, 0].T, (v[:, 1] - v[:, 0]).T, (v[:, 2] - v[:, 0]).T]), F)
+        self.nrm = _as_rows(surf.normal.T, F)
+        param = surf.mat_param[surf.material]
+        self.alb = _as_rows(param[:, P_KD:P_KD + 3].T, F)
+        nf = v.shape[0]
+        self.emit = _rows(3, nf, F)
+        self.tl = _rows(5, nf, F)
+        self.tl[TL_EPS, :nf] = surf.eps
+        self.tl[TL_ONE_SIDED, :nf] = (param[:, P_FLAGS].astype(np.int64) & ONE_SIDED) != 0
+        self.tl[TL_FAST, :nf] = fast_triangles(scene, lt)
+        self.escape_fast = lt.env_type == ENV_NONE
+        self.all_fast = bool(np.all(self.tl[TL_FAST, :nf] > 0.0)) and self.escape_fast  # every vertex fast
+        e = lt.tri
+        sel = (1.0 - lt.p_env) * np.diff(lt.cdf)
+        self.emit[:, e] = lt.radiance.T
+        self.tl[TL_SEL, e] = sel
+        self.tl[TL_AREA, e] = lt.area
+        self.n_lights = int(e.shape[0])
+        if self.n_lights:
+            prob, alias = alias_table(sel / sel.sum())
+            self.alias_p = prob.astype(F)
+            self.alias_i = np.stack([e, e[alias]]).astype(np.int32)
+        else:
+            self.alias_p = np.zeros(1, F)
+            self.alias_i = np.zeros((2, 1), np.int32)
+
+
+@jit
+def alias_table(p):
+    """Vose's alias table of the distribution p: (probability of keeping column j, alias of j)."""
+    n = p.shape[0]
+    scaled = p * n
+    prob = np.ones(n)
+    alias = np.arange(n)
+    small = np.empty(n, np.int64)
+    large = np.empty(n, np.int64)
+    ns = 0
+    nl = 0
+    for i in range(n):
+        if scaled[i] < 1.0:
+            small[ns] = i
+            ns += 1
+        else:
+            large[nl] = i
+            nl += 1
+    while ns > 0 and nl > 0:
+        ns -= 1
+        nl -= 1
+        s = small[ns]
+        g = large[nl]
+        prob[s] = scaled[s]
+        alias[s] = g
+        scaled[g] -= 1.0 - scaled[s]
+        if scaled[g] < 1.0:
+            small[ns] = g
+            ns += 1
+        else:
+            large[nl] = g
+            nl += 1
+    return prob, alias
+
+
+def fast_triangles(scene, lights):
+    """(F,) bool: the triangles whose vertices the fast class shades: a DIFFUSE material without
+    textures, opacity or vertex normals, in a scene lit by triangles only (the fast class's NEE
+    samples nothing else)."""
+    m = scene.materials
+    nf = scene.tri.shape[0]
+    if lights.env_type != ENV_NONE or lights.delta_kind.shape[0]:
+        return np.zeros(nf, np.bool_)
+    mat = scene.tri_material
+    ok = (m.type == DIFFUSE) & (m.param[:, P_CLEAR] == 0.0)
+    if m.tex is not None:
+        ok &= np.all(m.tex < 0, axis=1)
+    fast = ok[mat]
+    if scene.tri_vn.shape[0]:
+        fast &= ~np.any(scene.tri_vn != 0.0, axis=(1, 2))
+    return fast
+
+
+def usable(ctx, record, split, ps):
+    """Whether a wave can run on the lanes: render(path_loop="lanes"), Embree, no records, no
+    splitting, no primary samples, no guide (an empty GuideState)."""
+    if ctx.path_loop != "lanes" or ctx.accel.name != "embree" or record or split is not None:
+        return False
+    if ps is not None and np.any(ps.col >= 0):
+        return False
+    gs = ctx.guide_state
+    return not (gs.res[0] > 0 or gs.pixel_slot.shape[0] > 0 or gs.rr_late != 0)
+
+
+def _lane_scene(ctx):
+    """ctx's LaneScene, made once."""
+    if not hasattr(ctx, "_lanes"):
+        ctx._lanes = LaneScene(ctx.scene, ctx.surfaces, ctx.lights, ctx.accel.centre)
+    return ctx._lanes
+
+
+@kernel
+def start(ray_o, ray_d, centre, state, lf, li):
+    """Lanes 0 .. n-1 from the wave's paths 0 .. n-1 (their camera rays and wave.PathState)."""
+    beta = state.beta
+    depth = state.depth
+    prev_delta = state.prev_delta
+    key = state.key
+    for i in prange(ray_o.shape[0]):
+        lf[OX, i] = F(ray_o[i, 0] - centre[0])
+        lf[OY, i] = F(ray_o[i, 1] - centre[1])
+        lf[OZ, i] = F(ray_o[i, 2] - centre[2])
+        lf[DX, i] = F(ray_d[i, 0])
+        lf[DY, i] = F(ray_d[i, 1])
+        lf[DZ, i] = F(ray_d[i, 2])
+        lf[BR, i] = F(beta[i, 0])
+        lf[BG, i] = F(beta[i, 1])
+        lf[BB, i] = F(beta[i, 2])
+        lf[LR, i] = ZERO
+        lf[LG, i] = ZERO
+        lf[LB, i] = ZERO
+        lf[PDF, i] = ZERO
+        li[SLOT, i] = np.int32(i)
+        li[DEPTH, i] = np.int32(depth[i])
+        li[DELTA, i] = np.int32(1) if prev_delta[i] else np.int32(0)
+        k = np.uint64(key[i])
+        li[KEY, i] = np.int32(np.uint32((k ^ (k >> np.uint64(32))) & np.uint64(0xFFFFFFFF)))
+
+
+@kernel
+def intersect(fn, scene, scratch, lf, n, hit, prim):
+    """Closest hits of lanes 0 .. n-1 into hit (t, b1, b2) and prim (-1: none), 16 lanes to one
+    rtcIntersect16 (fn), each chunk of packets on one thread in its scratch row."""
+    L = _LANES
+    nch = scratch.shape[0]
+    npk = (n + L - 1) // L
+    for c in prange(nch):
+        buf = scratch[c]
+        ib = buf.view(np.int32)
+        addr = buf.ctypes.data
+        for pk in range(c * npk // nch, (c + 1) * npk // nch):
+            base = pk * L
+            m = min(L, n - base)
+            for k in range(L):
+                ib[17 * L + k] = -1
+                ib[18 * L + k] = -1
+                ib[_VALID * L + k] = 0
+            for k in range(m):
+                i = base + k
+                buf[k] = lf[OX, i]
+                buf[L + k] = lf[OY, i]
+                buf[2 * L + k] = lf[OZ, i]
+                buf[3 * L + k] = 0.0
+                buf[4 * L + k] = lf[DX, i]
+                buf[5 * L + k] = lf[DY, i]
+                buf[6 * L + k] = lf[DZ, i]
+                buf[7 * L + k] = 0.0
+                buf[8 * L + k] = np.inf
+                ib[9 * L + k] = -1
+                ib[10 * L + k] = 0
+                ib[11 * L + k] = 0
+                ib[_VALID * L + k] = -1
+            call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
+            for k in range(m):
+                i = base + k
+                if ib[18 * L + k] == -1:
+                    prim[i] = -1
+                else:
+                    prim[i] = ib[17 * L + k]
+                    hit[0, i] = buf[8 * L + k]
+                    hit[1, i] = buf[15 * L + k]
+                    hit[2, i] = buf[16 * L + k]
+
+
+@kernel
+def classify(lf, li, n, hit, prim, tl, nrm, alb, emit, escape_fast, state, fast_lane, general):
+    """Mark the lanes 0 .. n-1 whose vertex is of the fast class (fast_lane: a hit on a triangle
+    with tl[TL_FAST], or an escape where escape_fast) and list the others, in order, in `general`;
+    returns how many were listed. For the fast ones it writes what shade_vertex writes into the
+    wave's PathState `state` besides the path: at the camera ray's hit the AOVs' normal (facing the
+    camera) and distance and L_cam, the light the camera sees; the albedo at the first vertex
+    that is not a delta BSDF (aov_open)."""
+    aov = state.aov
+    aov_open = state.aov_open
+    L_cam = state.L_cam
+    counts = np.zeros(_CHUNKS + 1, np.int64)
+    for c in prange(_CHUNKS):
+        g = 0
+        for k in range(c * n // _CHUNKS, (c + 1) * n // _CHUNKS):
+            p = prim[k]
+            fast = tl[TL_FAST, p] > 0.0 if p >= 0 else escape_fast
+            fast_lane[k] = np.int32(1) if fast else np.int32(0)
+            if not fast:
+                g += 1
+                continue
+            i = li[SLOT, k]
+            first = li[DEPTH, k] == 0
+            if p < 0:
+                if first:
+                    for q in range(3):
+                        L_cam[i, q] = 0.0
+                continue
+            if first:
+                cos_o = -(lf[DX, k] * nrm[0, p] + lf[DY, k] * nrm[1, p] + lf[DZ, k] * nrm[2, p])
+                sgn = 1.0 if cos_o >= 0.0 else -1.0
+                lit = 1.0 if cos_o > 0.0 else 0.0
+                for q in range(3):
+                    aov[i, 3 + q] = sgn * nrm[q, p]
+                    L_cam[i, q] = lf[BR + q, k] * emit[q, p] * lit
+                aov[i, 6] = hit[0, k]
+            if aov_open[i]:
+                for q in range(3):
+                    aov[i, q] = alb[q, p]
+                aov_open[i] = False
+        counts[c + 1] = g
+    for c in range(_CHUNKS):
+        counts[c + 1] += counts[c]
+    for c in prange(_CHUNKS):
+        j = counts[c]
+        for k in range(c * n // _CHUNKS, (c + 1) * n // _CHUNKS):
+            if fast_lane[k] == 0:
+                general[j] = k
+                j += 1
+    return counts[_CHUNKS]
+
+
+@kernel
+def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, ps, limits, state):
+    """Shade the vertex of each lane general[0 .. ] (classify's list) with engine.vertex.shade_vertex
+    in float64, on the wave's PathState `state` (its path slot's row, loaded from the lane first:
+    throughput, depth, the last direction's density and delta flag), and write back into the lane
+    what the fast kernel writes: the next ray, the throughput, depth, density and delta flag after
+    it, flags[ALIVE], the shadow ray (flags[SHADOW], its value with the throughput in). The
+    emission it finds goes into the slot's radiance directly. limits: (max_depth, rr_depth, nee)."""
+    max_depth = limits[0]
+    rr_depth = limits[1]
+    nee = limits[2]
+    beta = state.beta
+    L = state.L
+    L_cam = state.L_cam
+    depth = state.depth
+    prev_pdf = state.prev_pdf
+    prev_delta = state.prev_delta
+    gain = state.gain
+    key = state.key
+    pix = state.pix
+    aov = state.aov
+    aov_open = state.aov_open
+    for j in prange(general.shape[0]):
+        k = general[j]
+        i = li[SLOT, k]
+        for q in range(3):
+            beta[i, q] = lf[BR + q, k]
+        depth[i] = li[DEPTH, k]
+        prev_pdf[i] = lf[PDF, k]
+        prev_delta[i] = li[DELTA, k] != 0
+        wray = (np.float64(lf[DX, k]), np.float64(lf[DY, k]), np.float64(lf[DZ, k]))
+        v = shade_vertex(i, wray, np.float64(hit[0, k]), prim[k], np.float64(hit[1, k]), np.float64(hit[2, k]), surf,
+                         lt, gs, ps, max_depth, rr_depth, nee, beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key,
+                         pix, aov, aov_open)
+        flags[ALIVE, k] = np.int32(1) if v.alive else np.int32(0)
+        if v.alive:
+            for q in range(3):
+                lf[OX + q, k] = v.next_o[q] - centre[q]
+                lf[DX + q, k] = v.next_d[q]
+                lf[BR + q, k] = beta[i, q]
+            lf[PDF, k] = prev_pdf[i]
+            li[DEPTH, k] = np.int32(depth[i])
+            li[DELTA, k] = np.int32(1) if prev_delta[i] else np.int32(0)
+        flags[SHADOW, k] = np.int32(1) if v.shadow else np.int32(0)
+        if v.shadow:
+            for q in range(3):
+                sh[SOX + q, k] = v.sh_o[q] - centre[q]
+                sh[SDX + q, k] = v.sh_d[q]
+                sh[SR + q, k] = v.sh_L[q]
+            sh[TMAX, k] = v.sh_tmax
+
+
+@kernel(fastmath={"arcp", "contract", "nsz"})
+def shade(lf, li, n, hit, prim, sh, flags, fast_lane, tri, nrm, alb, emit, tl, alias_p, alias_i, lim):
+    """Shade the vertex each lane 0 .. n-1 of the fast class (fast_lane) hit (prim -1: escaped, the
+    path ends): emission with its MIS weight (full without NEE or after a delta bounce) into the
+    lane's radiance; with NEE (lim[L_NEE]) a light sample with MIS into the shadow rows
+    (flags[SHADOW]); the cosine-sampled next ray, the throughput and depth after it, and the
+    roulette from lim[L_RR] (flags[ALIVE]). The other lanes keep the rows shade_general reads (the
+    direction, throughput, density, depth, delta flag: written back as loaded, since a store under a
+    branch, or a load after a store, keeps LLVM from packing the loop); their other rows are
+    scratch until shade_general, which runs next, writes them. lim: int32
+    rr_depth, max_depth (< 0: none), nee, the emissive triangles' count; the scene's rows as
+    LaneScene's."""
+    rr_depth = lim[L_RR]
+    max_depth = lim[L_MAX]
+    nee = lim[L_NEE] != 0
+    n_lights = lim[L_LIGHTS]
+    nl = alias_p.shape[0]
+    for k in prange(n):
+        fast = fast_lane[k] != 0
+        p = prim[k]
+        hit_ok = p >= 0
+        pc = p if hit_ok else 0
+        dx, dy, dz = lf[DX, k], lf[DY, k], lf[DZ, k]
+        t, b1, b2 = hit[0, k], hit[1, k], hit[2, k]
+        x0 = tri[0, pc] + b1 * tri[3, pc] + b2 * tri[6, pc]
+        x1 = tri[1, pc] + b1 * tri[4, pc] + b2 * tri[7, pc]
+        x2 = tri[2, pc] + b1 * tri[5, pc] + b2 * tri[8, pc]
+        nx, ny, nz = nrm[0, pc], nrm[1, pc], nrm[2, pc]
+        cos_o = -(dx * nx + dy * ny + dz * nz)
+        sgn = ONE if cos_o >= ZERO else -ONE
+        fx, fy, fz = nx * sgn, ny * sgn, nz * sgn
+        black = (tl[TL_ONE_SIDED, pc] > ZERO) & (cos_o < ZERO)  # a one-sided surface seen from behind
+        ar = ZERO if black else alb[0, pc]
+        ag = ZERO if black else alb[1, pc]
+        ab = ZERO if black else alb[2, pc]
+        br, bg, bb = lf[BR, k], lf[BG, k], lf[BB, k]
+        prev_pdf = lf[PDF, k]
+        depth = li[DEPTH, k]
+        delta = li[DELTA, k]
+        key = li[KEY, k]
+        base = BOUNCE + BLOCK * depth
+        on = hit_ok & ((max_depth < 0) | (depth + 1 < max_depth))  # the path may go on past this vertex
+
+        # emission (one-sided), MIS-weighted against the light sample that could have found it
+        lit = fast & hit_ok & (cos_o > ZERO)
+        pl = tl[TL_SEL, pc] * t * t / max(tl[TL_AREA, pc] * cos_o, TINY)
+        pp = prev_pdf * prev_pdf
+        w_mis = pp / max(pp + pl * pl, TINY)
+        w_e = ZERO if not lit else (w_mis if nee & (depth > 0) & (delta == 0) else ONE)
+        lf[LR, k] += br * emit[0, pc] * w_e
+        lf[LG, k] += bg * emit[1, pc] * w_e
+        lf[LB, k] += bb * emit[2, pc] * w_e
+
+        # a light sample: an emissive triangle from the alias table, a point uniform on it
+        us = rand32(key, base + D_LIGHT) * F(nl)
+        j = min(np.int32(us), np.int32(nl - 1))
+        lj = alias_i[0, j] if us - F(j) < alias_p[j] else alias_i[1, j]
+        su = math.sqrt(rand32(key, base + D_POS))
+        lb1 = ONE - su
+        lb2 = rand32(key, base + D_POS + 1) * su
+        wx = tri[0, lj] + lb1 * tri[3, lj] + lb2 * tri[6, lj] - x0
+        wy = tri[1, lj] + lb1 * tri[4, lj] + lb2 * tri[7, lj] - x1
+        wz = tri[2, lj] + lb1 * tri[5, lj] + lb2 * tri[8, lj] - x2
+        d2 = max(wx * wx + wy * wy + wz * wz, TINY)
+        inv_d = ONE / math.sqrt(d2)
+        wx, wy, wz = wx * inv_d, wy * inv_d, wz * inv_d
+        cos_l = -(wx * nrm[0, lj] + wy * nrm[1, lj] + wz * nrm[2, lj])
+        cos_s = wx * fx + wy * fy + wz * fz
+        ok = on & nee & (n_lights > 0) & (cos_l > ZERO) & (cos_s > ZERO)
+        pls = tl[TL_SEL, lj] * d2 / max(tl[TL_AREA, lj] * cos_l, TINY)
+        pb = cos_s * INV_PI
+        g = (pb * pls / max(pls * pls + pb * pb, TINY)) if ok else ZERO  # f cos / p_light x the power heuristic
+        eps = tl[TL_EPS, pc]
+        ox, oy, oz = x0 + fx * eps, x1 + fy * eps, x2 + fz * eps
+        sr = br * ar * emit[0, lj] * g
+        sg = bg * ag * emit[1, lj] * g
+        sb = bb * ab * emit[2, lj] * g
+        sh[SOX, k], sh[SOY, k], sh[SOZ, k] = ox, oy, oz
+        sh[SDX, k], sh[SDY, k], sh[SDZ, k] = wx, wy, wz
+        sh[TMAX, k] = d2 * inv_d * SHORT
+        sh[SR, k], sh[SG, k], sh[SB, k] = sr, sg, sb
+        flags[SHADOW, k] = np.int32(1) if (sr + sg + sb) > ZERO else np.int32(0)
+
+        # the cosine bounce, in the frame of the arrival side's normal (Duff et al. 2017)
+        u2 = rand32(key, base + D_DIR)
+        c, s = sincos2pi(rand32(key, base + D_DIR + 1))
+        r = math.sqrt(u2)
+        lx, ly = r * c, r * s
+        lz = math.sqrt(max(ZERO, ONE - u2))
+        sg_z = ONE if fz >= ZERO else -ONE
+        a = -ONE / (sg_z + fz)
+        bq = fx * fy * a
+        wix = (ONE + sg_z * fx * fx * a) * lx + bq * ly + fx * lz
+        wiy = sg_z * bq * lx + (sg_z + fy * fy * a) * ly + fy * lz
+        wiz = -sg_z * fx * lx - fy * ly + fz * lz
+        nbr, nbg, nbb = br * ar, bg * ag, bb * ab
+        nmax = max(nbr, max(nbg, nbb))
+
+        # the roulette of the new bounce, and the bounce cap
+        qq = min(nmax, F(0.95)) if depth + 1 >= rr_depth else ONE
+        go = on & (lz > ZERO) & (nmax > ZERO) & (rand32(key, base + D_RR) < qq) & (depth + 1 < MAX_BOUNCES)
+        inv_q = ONE / max(qq, TINY)
+        lf[OX, k], lf[OY, k], lf[OZ, k] = ox, oy, oz
+        lf[DX, k] = wix if fast else dx
+        lf[DY, k] = wiy if fast else dy
+        lf[DZ, k] = wiz if fast else dz
+        lf[BR, k] = nbr * inv_q if fast else br
+        lf[BG, k] = nbg * inv_q if fast else bg
+        lf[BB, k] = nbb * inv_q if fast else bb
+        lf[PDF, k] = lz * INV_PI if fast else prev_pdf
+        li[DEPTH, k] = np.int32(depth + 1) if fast else depth
+        li[DELTA, k] = np.int32(0) if fast else delta
+        flags[ALIVE, k] = np.int32(1) if go else np.int32(0)
+
+
+@kernel
+def occlude(fn, scene, scratch, n, sh, flags, lf):
+    """Trace the shadow rays of lanes 0 .. n-1 that have one, 16 to one rtcOccluded16 (fn: each
+    chunk of lanes fills its packets with the next 16 it finds), and add the value of each
+    unblocked one to its lane's radiance. Returns how many were traced."""
+    L = _LANES
+    nch = scratch.shape[0]
+    traced = 0
+    for c in prange(nch):
+        buf = scratch[c]
+        ib = buf.view(np.int32)
+        addr = buf.ctypes.data
+        lane = np.empty(L, np.int64)
+        f = 0  # lanes in the packet
+        hi = (c + 1) * n // nch
+        for i in range(c * n // nch, hi + 1):
+            if i < hi and flags[SHADOW, i] != 0:
+                buf[f] = sh[SOX, i]
+                buf[L + f] = sh[SOY, i]
+                buf[2 * L + f] = sh[SOZ, i]
+                buf[3 * L + f] = 0.0
+                buf[4 * L + f] = sh[SDX, i]
+                buf[5 * L + f] = sh[SDY, i]
+                buf[6 * L + f] = sh[SDZ, i]
+                buf[7 * L + f] = 0.0
+                buf[8 * L + f] = sh[TMAX, i]
+                ib[9 * L + f] = -1
+                ib[10 * L + f] = 0
+                ib[11 * L + f] = 0
+                ib[_VALID * L + f] = -1
+                lane[f] = i
+                f += 1
+            if f == L or (i == hi and f > 0):
+                for k in range(f, L):
+                    ib[_VALID * L + k] = 0
+                call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
+                for k in range(f):
+                    if buf[8 * L + k] != -np.inf:  # Embree sets tfar to -inf when blocked
+                        j = lane[k]
+                        lf[LR, j] += sh[SR, j]
+                        lf[LG, j] += sh[SG, j]
+                        lf[LB, j] += sh[SB, j]
+                traced += f
+                f = 0
+    return traced
+
+
+@kernel
+def compact(lf, li, n, flags, L, hole, mover):
+    """Keep the lanes 0 .. n-1 that go on (flags[ALIVE]) in lanes 0 .. m-1 and return m: the radiance
+    of every other lane is added to its path slot's row of L (float64, which holds what the general
+    kernel added there), and each lane that goes on from
+    m or past moves, every row, into a hole that an ended one left below m, the k-th mover into the
+    k-th hole (hole, mover: int32 scratch of n). The lanes' order changes; what moves is one lane
+    per path that ended."""
+    counts = np.zeros((_CHUNKS + 1, 2), np.int64)
+    for c in prange(_CHUNKS):
+        a = 0
+        for k in range(c * n // _CHUNKS, (c + 1) * n // _CHUNKS):
+            if flags[ALIVE, k] != 0:
+                a += 1
+            else:
+                s = li[SLOT, k]
+                L[s, 0] += lf[LR, k]
+                L[s, 1] += lf[LG, k]
+                L[s, 2] += lf[LB, k]
+        counts[c + 1, 0] = a
+    for c in range(_CHUNKS):
+        counts[c + 1, 0] += counts[c, 0]
+    m = counts[_CHUNKS, 0]
+    for c in prange(_CHUNKS):
+        h = 0
+        v = 0
+        for k in range(c * n // _CHUNKS, (c + 1) * n // _CHUNKS):
+            if k < m:
+                h += 1 - flags[ALIVE, k]
+            else:
+                v += flags[ALIVE, k]
+        counts[c + 1, 0] = h
+        counts[c + 1, 1] = v
+    counts[0, 0] = 0
+    for c in range(_CHUNKS):
+        counts[c + 1, 0] += counts[c, 0]
+        counts[c + 1, 1] += counts[c, 1]
+    for c in prange(_CHUNKS):
+        h = counts[c, 0]
+        v = counts[c, 1]
+        for k in range(c * n // _CHUNKS, (c + 1) * n // _CHUNKS):
+            if k < m:
+                if flags[ALIVE, k] == 0:
+                    hole[h] = k
+                    h += 1
+            elif flags[ALIVE, k] != 0:
+                mover[v] = k
+                v += 1
+    nf = lf.shape[0]
+    ni = li.shape[0]
+    for r in prange(counts[_CHUNKS, 0]):
+        k = mover[r]
+        j = hole[r]
+        for q in range(nf):
+            lf[q, j] = lf[q, k]
+        for q in range(ni):
+            li[q, j] = li[q, k]
+    return m
+
+
+def run(ctx, buf, n, ps, stats):
+    """Trace the n paths the source started in `buf` (wave.WaveBuffers; ps: the source's
+    rng.PrimarySamples, supplying none) to their end on the lanes: each path's radiance into
+    buf.L, its AOVs and L_cam, as the other path loops leave them. stats.trace_parts gets the
+    seconds of the ray queries, the shading (both classes) and the rest; stats.lane_samples the
+    paths, stats.lane_general the vertices the general kernel shaded."""
+    t0 = time.perf_counter()
+    ls = _lane_scene(ctx)
+    lanes = getattr(buf, "_lanes", None)
+    if lanes is None or lanes.size < n:
+        lanes = buf._lanes = LaneBuffers(buf.size)
+    accel = ctx.accel
+    scene, _, centre, _, scratch = accel.packet_args()
+    lim = np.array([ctx.rr_depth, ctx.max_depth, int(ctx.nee), ls.n_lights], np.int32)
+    limits = (ctx.max_depth, ctx.rr_depth, ctx.nee)
+    state = buf.path_state(n)
+    rays = shadows = general = 0
+    part = dict.fromkeys(TRACE_PARTS, 0.0)  # seconds of each step
+    clock = time.perf_counter
+    lf, li, flags = lanes.f, lanes.i, lanes.flags
+    with _NumbaThreads(accel.threads):
+        t = clock()
+        start(buf.ray_o[:n], buf.ray_d[:n], centre, state, lf, li)
+        m = n
+        first = True
+        while m > 0:
+            t1 = clock()
+            part["rest"] += t1 - t
+            intersect(_INTERSECT16, scene, scratch, lf, m, lanes.hit, lanes.prim)
+            rays += m
+            t2 = clock()
+            part["intersect"] += t2 - t1
+            ng = 0
+            if first or not ls.all_fast:  # in a scene all fast, only the camera rays' hits (AOVs) need it
+                ng = int(classify(lf, li, m, lanes.hit, lanes.prim, ls.tl, ls.nrm, ls.alb, ls.emit, ls.escape_fast,
+                                  state, lanes.fast, lanes.general))
+                first = False
+            if ng < m:
+                shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.tri, ls.nrm, ls.alb,
+                      ls.emit, ls.tl, ls.alias_p, ls.alias_i, lim)
+            if ng:
+                shade_general(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.general[:ng], centre,
+                              ctx.surfaces, ctx.lights, ctx.guide_state, ps, limits, state)
+                general += ng
+            t3 = clock()
+            part["shade"] += t3 - t2
+            shadows += occlude(_OCCLUDED16, scene, scratch, m, lanes.shadow, flags, lf)
+            t = clock()
+            part["occluded"] += t - t3
+            m = int(compact(lf, li, m, flags, buf.L, lanes.hole, lanes.mover))
+        part["rest"] += clock() - t
+    stats.rays += rays
+    stats.shadow_rays += shadows
+    stats.lane_samples += n
+    stats.lane_general += general
+    for name, sec in part.items():
+        stats.trace_parts[name] += sec
+    stats.tick("trace", t0)
