@@ -40,6 +40,7 @@ import numpy as np
 from numba import njit, prange
 
 import tracer
+from tracer.engine import lanes
 from tracer.guiding.records import Records
 from tracer.integrators import path as path_mod
 from tracer.wave import Continuation, PathState, ShadowRays
@@ -62,59 +63,25 @@ def _cpuinfo():
 LANES = 16 if "avx512f" in _cpuinfo() else 8
 FLAGS = {"arcp", "contract", "nsz"}
 
-# float32 constants: a Python float literal is float64 in Numba and would widen the arithmetic
-F = np.float32
+# float32 constants (a Python float literal is float64 in Numba and would widen the arithmetic), the
+# lanes' random numbers and polynomial sincos: the engine's (tracer.engine.lanes)
+F = lanes.F
 ZERO, ONE, HALF = F(0.0), F(1.0), F(0.5)
-INV_PI = F(1.0 / math.pi)
-TWO_PI = F(2.0 * math.pi)
-HALF_PI = F(0.5 * math.pi)
-INV24 = F(2.0 ** -24)
-Q_MAX = F(0.95)
-SHORT = F(1.0 - 1e-3)
-TINY = F(1e-20)
-# Taylor coefficients of sin and cos on [0, pi/2] (errors below 4e-6 and 5e-7 there)
-S3, S5, S7, S9, S11 = (F(-1.0 / 6.0), F(1.0 / 120.0), F(-1.0 / 5040.0), F(1.0 / 362880.0), F(-1.0 / 39916800.0))
-C2, C4, C6, C8, C10 = (F(-0.5), F(1.0 / 24.0), F(-1.0 / 720.0), F(1.0 / 40320.0), F(-1.0 / 3628800.0))
-
+INV_PI, TWO_PI, TINY, SHORT = lanes.INV_PI, F(2.0 * math.pi), lanes.TINY, lanes.SHORT
+Q_MAX = F(lanes.RR_MAX)
 U32 = np.uint32
-_GOLDEN32, _FM1, _FM2 = U32(0x9E3779B9), U32(0x85EBCA6B), U32(0xC2B2AE35)
-_S16, _S13, _S8 = U32(16), U32(13), U32(8)
-
+_rand = lanes.rand32  # float32 in [0, 1) from a 32-bit key and a dimension
+sincos_poly = lanes.sincos2pi
+alias_table = lanes.alias_table
 # random dimensions of a bounce (tracer.rng's table: light choice, light position, direction, roulette)
-D_LIGHT, D_POS, D_DIR, D_RR = 4, 5, 0, 7
-BOUNCE, BLOCK = 2, 8
-
-
-@njit(inline="always")
-def _rand(key, dim):
-    """float32 in [0, 1): the top 24 bits of MurmurHash3's finaliser of key ^ (dim + 1) x golden,
-    in 32-bit integers (every cast kept, so that the loop's widest lane type is 32 bits and LLVM
-    packs 8 or 16 lanes rather than the 4 of 64-bit ones)."""
-    x = U32(key ^ U32(U32(dim + 1) * _GOLDEN32))
-    x = U32(U32(x ^ (x >> _S16)) * _FM1)
-    x = U32(U32(x ^ (x >> _S13)) * _FM2)
-    x = U32(x ^ (x >> _S16))
-    return F(np.int32(x >> _S8)) * INV24
+D_LIGHT, D_POS, D_DIR, D_RR = lanes.D_LIGHT, lanes.D_POS, lanes.D_DIR, lanes.D_RR
+BOUNCE, BLOCK = lanes.BOUNCE, lanes.BLOCK
 
 
 @njit(inline="always")
 def sincos_libm(u):
     a = u * TWO_PI
     return math.cos(a), math.sin(a)
-
-
-@njit(inline="always")
-def sincos_poly(u):
-    """(cos, sin) of 2 pi u for u in [0, 1): the quadrant from 4u, then Taylor polynomials on [0, pi/2)."""
-    v = u * F(4.0)
-    q = min(np.int32(v), np.int32(3))
-    a = (v - F(q)) * HALF_PI
-    a2 = a * a
-    s = a * (ONE + a2 * (S3 + a2 * (S5 + a2 * (S7 + a2 * (S9 + a2 * S11)))))
-    c = ONE + a2 * (C2 + a2 * (C4 + a2 * (C6 + a2 * (C8 + a2 * C10))))
-    cq = c if q == 0 else (-s if q == 1 else (-c if q == 2 else s))
-    sq = s if q == 0 else (c if q == 1 else (-s if q == 2 else -c))
-    return cq, sq
 
 
 # The vertex of lane k, as source text placed inside each loop form below. It is not a function
@@ -291,21 +258,6 @@ def lane_scene(surf, lt):
 def limits(calls):
     """int32 [rr_depth, max_depth] of the captured render (shade's arguments 12 and 11)."""
     return np.array([calls[0][12], calls[0][11]], np.int32)
-
-
-def alias_table(p):
-    """Vose's alias table of the distribution p: (probability of keeping column j, alias of j)."""
-    n = p.size
-    scaled = p * n
-    prob, alias = np.ones(n), np.arange(n)
-    small = [i for i in range(n) if scaled[i] < 1.0]
-    large = [i for i in range(n) if scaled[i] >= 1.0]
-    while small and large:
-        s, g = small.pop(), large.pop()
-        prob[s], alias[s] = scaled[s], g
-        scaled[g] -= 1.0 - scaled[s]
-        (small if scaled[g] < 1.0 else large).append(g)
-    return prob, alias
 
 
 class Batch:

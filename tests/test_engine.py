@@ -9,7 +9,9 @@ a shadow ray credited to the wrong lane, a lane lost or traced twice by the comp
 per-thread loop itself is checked against the wavefront bit for bit (test_thread_loop.py) and
 the wavefront against analytic answers and Mitsuba 3.
 """
+import json
 import logging
+import math
 import os
 
 import numpy as np
@@ -24,7 +26,44 @@ BLOCK = 6
 
 
 def _scene(name, size=48):
+    if name in ("bathroom", "veach-ajar"):
+        path = os.path.join(os.path.dirname(ROOT), "shared", "scenes-mitsuba", name, "scene.xml")
+        if not os.path.exists(path):
+            pytest.skip(f"{path} is not there (../shared beside the checkout)")
+        return tracer.load_scene(path, width=size, height=size * 9 // 16)
     return tracer.load_scene(os.path.join(ROOT, "scenes", name, f"{name}.obj"), width=size, height=size)
+
+
+def _smooth_sphere_scene(folder, size=48):
+    """A coarse sphere with corner normals (smooth shading) on a floor, under a quad light, all
+    diffuse: written to `folder` as OBJ, MTL and sidecar JSON, and loaded."""
+    nu, nv, r, c = 8, 5, 0.5, (0.0, 0.5, 0.0)
+    v, vn, f = [], [], []
+    for j in range(nv + 1):
+        th = math.pi * j / nv
+        for i in range(nu):
+            ph = 2.0 * math.pi * i / nu
+            n = (math.sin(th) * math.cos(ph), math.cos(th), math.sin(th) * math.sin(ph))
+            v.append(tuple(c[k] + r * n[k] for k in range(3)))
+            vn.append(n)
+    for j in range(nv):
+        for i in range(nu):
+            a, b = j * nu + i + 1, j * nu + (i + 1) % nu + 1
+            a2, b2 = a + nu, b + nu
+            f += [(a, b, b2), (a, b2, a2)]
+    lines = ["mtllib scene.mtl"] + [f"v {x} {y} {z}" for x, y, z in v] + [f"vn {x} {y} {z}" for x, y, z in vn]
+    lines += ["usemtl ball"] + [f"f {a}//{a} {b}//{b} {d}//{d}" for a, b, d in f if len({a, b, d}) == 3]
+    k = len(v)
+    lines += [f"v {x} 0 {z}" for x, z in ((-2, -2), (2, -2), (2, 2), (-2, 2))]
+    lines += ["usemtl floor", f"f {k + 1} {k + 3} {k + 2}", f"f {k + 1} {k + 4} {k + 3}"]
+    lines += [f"v {x} 2 {z}" for x, z in ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))]
+    lines += ["usemtl light", f"f {k + 5} {k + 6} {k + 7}", f"f {k + 5} {k + 7} {k + 8}"]
+    (folder / "scene.obj").write_text("\n".join(lines) + "\n")
+    (folder / "scene.mtl").write_text("newmtl ball\nKd 0.7 0.6 0.5\nnewmtl floor\nKd 0.5 0.5 0.5\n"
+                                      "newmtl light\nKd 0 0 0\nKe 8 8 8\n")
+    (folder / "scene.json").write_text(json.dumps({"camera": {"origin": [0.0, 1.2, -2.2], "target": [0.0, 0.5, 0.0],
+                                                              "up": [0, 1, 0], "fov": 40}}))
+    return tracer.load_scene(str(folder / "scene.obj"), width=size, height=size)
 
 
 def _blocks(a):
@@ -41,6 +80,7 @@ def _blocks(a):
     ("glossy", dict(max_depth=6), True),  # a mirror and metals beside diffuse walls: both classes in one path
     ("window", dict(max_depth=5), True),  # an environment: every vertex general
     ("spotlit", dict(max_depth=4), True),  # point and spot lights
+    ("bathroom", dict(max_depth=5), True),  # Mitsuba XML: smooth diffuse, plastics, metals, glass, a mask
 ])
 def test_lanes_equal_the_per_thread_loop_in_expectation(name, kw, general):
     """Image mean and block means of the lanes against the per-thread loop (independent seeds)."""
@@ -62,6 +102,54 @@ def test_lanes_equal_the_per_thread_loop_in_expectation(name, kw, general):
     keep = var > 0
     assert keep.sum() > 0.5 * keep.size
     assert_z(_blocks(ia)[keep], var[keep], _blocks(ib)[keep], what=f"{name}: {BLOCK}x{BLOCK} block means")
+
+
+@pytest.mark.parametrize("guide", ["grid:iterations=2", "ppg:iterations=2,window=0", "photon:iterations=2",
+                                   "grid:iterations=2,split=1.5"])
+def test_a_guides_final_passes_run_on_the_lanes(guide):
+    """A guide's final passes run on the lanes, every vertex through shade_vertex (the guide's
+    mixture) while the guide has maps, splitting and the weight window by split_lanes (photon's
+    defaults: split 2, window 3); its training passes, which record, on the other loops. The images agree with the per-thread loop's in expectation (each render trains its own
+    maps from its own seed: both estimate the same image without bias)."""
+    scene = _scene("ajar", 32)
+    kw = dict(spp=48, guide=guide, max_depth=6)
+    a = tracer.render(scene, seed=1, path_loop="lanes", **kw)
+    b = tracer.render(scene, seed=2, path_loop="thread", **kw)
+    assert_clean(a, "lanes")
+    assert_clean(b, "thread")
+    assert 0 < a.stats["lane_samples"] < a.stats["samples"]
+    # under the guide's maps every vertex is general; a guide that switched itself off left none
+    # (ajar's vertices are all of the fast class)
+    assert (a.stats["lane_general_vertices"] > 0) != a.stats["guide_stats"]["switched_off"]
+    if "split" in guide or guide.startswith("photon"):
+        assert (a.stats["split_copies"] > 0) != a.stats["guide_stats"]["switched_off"]
+    ma, va = image_mean(a)
+    mb, vb = image_mean(b)
+    assert_z(ma, va + vb, mb, what=f"{guide}: image mean, lanes against thread")
+
+
+def test_smooth_shading_on_the_fast_class(tmp_path):
+    """A sphere of 80 triangles with corner normals: the fast class shades it in the interpolated
+    normal's frame (no general vertex), and its image equals the per-thread loop's in expectation.
+    Shading with the true normals instead makes the facets' brightness differ by up to ~20% between
+    neighbours, which the block means see."""
+    scene = _smooth_sphere_scene(tmp_path)
+    assert scene.tri_vn.shape[0] > 0
+    kw = dict(spp=96, max_depth=5)
+    a = tracer.render(scene, seed=1, path_loop="lanes", **kw)
+    b = tracer.render(scene, seed=2, path_loop="thread", **kw)
+    assert_clean(a, "lanes")
+    assert a.stats["lane_general_vertices"] == 0 and a.stats["lane_samples"] == a.stats["samples"]
+    ma, va = image_mean(a)
+    mb, vb = image_mean(b)
+    assert_z(ma, va + vb, mb, what="smooth sphere: image mean")
+    n = BLOCK * BLOCK
+    var = (_blocks(a.variance.astype(np.float64)) + _blocks(b.variance.astype(np.float64))) / n
+    keep = var > 0
+    assert_z(_blocks(a.image.astype(np.float64))[keep], var[keep], _blocks(b.image.astype(np.float64))[keep],
+             what="smooth sphere: block means")
+    a4, b4 = (tracer.render(scene, spp=4, seed=3, path_loop=loop, max_depth=2) for loop in ("lanes", "thread"))
+    np.testing.assert_allclose(a4.aovs["normal"], b4.aovs["normal"], atol=2e-6)
 
 
 def test_lanes_aovs_are_the_first_hits():

@@ -275,7 +275,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     t_setup = _time.perf_counter() - t_start
     ctx = RenderContext(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter, crop, integ.nee)
     ctx.path_loop = path_loop
-    if path_loop == "lanes" and (gaps := engine_gaps(acc.name, g is not None)):
+    if path_loop == "lanes" and (gaps := engine_gaps(acc.name)):
         log.warning("path_loop lanes: not with %s; the render runs on the other path loops", ", ".join(gaps))
     # Trace throwaway paths first: they compile the kernels the render will run (or load them from
     # the cache), so that neither the time budget nor the stats count Numba's compile. Recorded
@@ -383,11 +383,11 @@ def _warm_up(ctx, g, splits, integ, kernels, crop):
     integ.warm_up(ctx)
 
 
-def engine_gaps(accel, guided):
-    """What keeps a render's passes off the lanes of tracer.engine (path_loop="lanes"): short reasons."""
-    if accel != "embree":
-        return [f"the {accel} accel (the lanes need Embree)"]
-    return ["a guide (its passes run on the per-thread loop)"] if guided else []
+def engine_gaps(accel):
+    """What keeps a render's passes off the lanes of tracer.engine (path_loop="lanes"): short reasons.
+    (A guide's training passes, which record, and its splitting final passes take the other
+    loops without a word: the render's stats say how many samples the lanes traced.)"""
+    return [f"the {accel} accel (the lanes need Embree)"] if accel != "embree" else []
 
 
 def compile_plan(guided, integ, accel, path_loop="thread"):
@@ -396,7 +396,7 @@ def compile_plan(guided, integ, accel, path_loop="thread"):
     path_loop="wave"), and the guides' photon tracer. What _jit.kernels_cached checks before a
     render, to say that a compile is coming."""
     names = list(integ.kernels())
-    if path_loop == "lanes" and not guided and "thread_loop.trace_paths" in names and accel == "embree":
+    if path_loop == "lanes" and "thread_loop.trace_paths" in names and accel == "embree":
         names += ["lanes.shade", "lanes.shade_general"]
     if guided or (("thread_loop.trace_paths" in names) and (accel != "embree" or path_loop == "wave")):
         names = [n for n in names if n != "thread_loop.trace_paths"] + ["path.shade"]

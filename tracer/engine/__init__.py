@@ -5,9 +5,10 @@
 - `lanes` (Embree only; `render(path_loop="lanes")`, CLI `--path-loop lanes`): a wave's paths
   as float32 structure-of-arrays lanes; the vertices of its fast class (diffuse, untextured,
   under triangle lights) are shaded by a vectorised loop, every other one by `shade_vertex`.
-  The integrators reach it through `lanes.usable(ctx, record, split, ps)` and
-  `lanes.run(ctx, buf, n, ps, stats)`, which trace a wave that a source started in a
-  wave.WaveBuffers and leave each path's radiance and AOVs in it, as the other path loops do.
+  The integrators reach it through `lanes.usable(ctx, record, ps)` and
+  `lanes.run(ctx, buf, n, ps, stats, split)`, which trace a wave that a source started in a
+  wave.WaveBuffers (splitting it by a splitting.SplitPlan) and leave each path's radiance and
+  AOVs in it, as the other path loops do.
 
 Nothing here imports tracer.integrators, tracer.gradient or a guide beyond its contract.
 """

@@ -6,8 +6,9 @@ name here. A bounce runs these kernels over lanes 0 .. m-1:
 
 - `intersect`: closest hits, 16 lanes to one rtcIntersect16 (Embree's float32 hit, no float64
   refinement: the hit point is rebuilt from the barycentrics, on the triangle's plane);
-- `classify`: which lanes' vertices are of the fast class (a diffuse triangle without textures,
-  opacity or vertex normals, in a scene lit by triangles only; or an escape with no environment),
+- `classify`: which lanes' vertices are of the fast class (a diffuse triangle without textures or
+  opacity, flat or with corner normals, in a scene lit by triangles only; or an escape with no
+  environment),
   their AOVs and L_cam; the others listed for the general kernel;
 - `shade`: the fast class, one `prange` over the lanes that LLVM packs 8 or 16 to an instruction
   (the body holds no helper that takes arrays and no `and` chain, integers stay 32-bit:
@@ -26,8 +27,9 @@ random numbers from a 32-bit hash of the path's key folded to 32 bits and the di
 other path loops do: the images agree with theirs in expectation, not bit for bit
 (tests/test_engine.py z-tests them).
 
-What a wave needs to run here (`usable`): the path integrator's plain passes (no guide, no
-records, no splitting, no primary samples) and Embree.
+What a wave needs to run here (`usable`): Embree, and a pass that neither records, splits nor
+takes primary samples (a guide's final passes without splitting included: under a guide's maps
+every vertex goes to the general kernel).
 """
 import math
 import time
@@ -40,6 +42,7 @@ from ..bsdfs import DIFFUSE, ONE_SIDED, P_CLEAR, P_FLAGS, P_KD
 from ..bvh.embree import _INTERSECT16, _LANES, _OCCLUDED16, _VALID, call4
 from ..bvh.numba_bvh import _NumbaThreads
 from ..lights import ENV_NONE
+from ..splitting import make_copy, merge_copies, split_count
 from ..wave import TRACE_PARTS
 from .vertex import MAX_BOUNCES, shade_vertex
 
@@ -59,7 +62,9 @@ ALIVE, SHADOW = range(len(FLAG_ROWS))
 # A bounce's shadow rays: origin, unit direction, tmax, the value it adds if unblocked
 SHADOW_ROWS = ("sox", "soy", "soz", "sdx", "sdy", "sdz", "tmax", "sr", "sg", "sb")
 SOX, SOY, SOZ, SDX, SDY, SDZ, TMAX, SR, SG, SB = range(len(SHADOW_ROWS))
-# The scene's rows per triangle: tl (TL_SEL, TL_AREA, TL_EPS, TL_ONE_SIDED, TL_FAST)
+# The scene's rows per triangle: geo (the corner v0, the edges e1, e2, the geometric normal, the
+# corner normals vn0, vn1, vn2: three rows each) and tl (TL_SEL, TL_AREA, TL_EPS, TL_ONE_SIDED, TL_FAST)
+G_V0, G_E1, G_E2, G_N, G_VN = 0, 3, 6, 9, 12
 TL_SEL, TL_AREA, TL_EPS, TL_ONE_SIDED, TL_FAST = range(5)
 
 # Rows are this many lanes longer than they need be: rows a power of two long lie a multiple of
@@ -76,6 +81,7 @@ HALF_PI = F(0.5 * math.pi)
 INV24 = F(2.0 ** -24)
 SHORT = F(1.0 - 1e-3)  # a shadow ray ends this fraction of the way to its light point
 TINY = F(1e-20)
+RR_MAX = 0.95  # the roulette's survival cap (GuideState.rr_max's default), the fast class's
 # Taylor coefficients of sin and cos on [0, pi/2] (errors below 4e-6 and 5e-7 there)
 S3, S5, S7, S9, S11 = (F(-1.0 / 6.0), F(1.0 / 120.0), F(-1.0 / 5040.0), F(1.0 / 362880.0), F(-1.0 / 39916800.0))
 C2, C4, C6, C8, C10 = (F(-0.5), F(1.0 / 24.0), F(-1.0 / 720.0), F(1.0 / 40320.0), F(-1.0 / 3628800.0))
@@ -129,6 +135,7 @@ class LaneBuffers:
         self.shadow = _rows(len(SHADOW_ROWS), size, F)
         self.fast = np.zeros(size, np.int32)  # the lane's vertex is of the fast class
         self.general = np.zeros(size, np.int32)  # the lanes the general kernel shades
+        self.ks = np.ones(size, np.int64)  # split_lanes: copies of each lane (0: the window ended it)
 
 
 def _rows(rows, n, dtype):
@@ -144,8 +151,9 @@ def _as_rows(a, dtype):
 
 
 class LaneScene:
-    """The scene as the lanes read it, float32 rows per triangle (padded: _rows): tri (9, F) v0 - centre, e1, e2;
-    nrm (3, F) unit geometric normal; alb (3, F) diffuse reflectance; emit (3, F) radiance; tl (5, F)
+    """The scene as the lanes read it, float32 rows per triangle (padded: _rows): geo (21, F) v0 - centre,
+    e1, e2, the unit geometric normal, the three corner normals (zero: none; rows G_*); alb (3, F)
+    diffuse reflectance; emit (3, F) radiance; tl (5, F)
     NEE's probability of choosing the triangle, its area, its ray offset, 1 if one-sided, 1 if its
     vertices are of the fast class (fast_triangles); the alias table over the emissive triangles
     (alias_p: the probability of keeping column j; alias_i (2, columns): column j's triangle and its
@@ -153,8 +161,9 @@ class LaneScene:
 
     def __init__(self, scene, surf, lt, centre):
         v = surf.tri - centre
-        self.tri = _as_rows(np.concatenate([v[:, 0].T, (v[:, 1] - v[:, 0]).T, (v[:, 2] - v[:, 0]).T]), F)
-        self.nrm = _as_rows(surf.normal.T, F)
+        vn = surf.vn if surf.vn.shape[0] else np.zeros_like(v)
+        self.geo = _as_rows(np.concatenate([v[:, 0].T, (v[:, 1] - v[:, 0]).T, (v[:, 2] - v[:, 0]).T, surf.normal.T,
+                                            vn[:, 0].T, vn[:, 1].T, vn[:, 2].T]), F)
         param = surf.mat_param[surf.material]
         self.alb = _as_rows(param[:, P_KD:P_KD + 3].T, F)
         nf = v.shape[0]
@@ -217,8 +226,8 @@ def alias_table(p):
 
 def fast_triangles(scene, lights):
     """(F,) bool: the triangles whose vertices the fast class shades: a DIFFUSE material without
-    textures, opacity or vertex normals, in a scene lit by triangles only (the fast class's NEE
-    samples nothing else)."""
+    textures or opacity (vertex normals allowed), in a scene lit by triangles only (the fast class's
+    NEE samples nothing else)."""
     m = scene.materials
     nf = scene.tri.shape[0]
     if lights.env_type != ENV_NONE or lights.delta_kind.shape[0]:
@@ -227,21 +236,119 @@ def fast_triangles(scene, lights):
     ok = (m.type == DIFFUSE) & (m.param[:, P_CLEAR] == 0.0)
     if m.tex is not None:
         ok &= np.all(m.tex < 0, axis=1)
-    fast = ok[mat]
-    if scene.tri_vn.shape[0]:
-        fast &= ~np.any(scene.tri_vn != 0.0, axis=(1, 2))
-    return fast
+    return ok[mat]
 
 
-def usable(ctx, record, split, ps):
+def usable(ctx, record, ps):
     """Whether a wave can run on the lanes: render(path_loop="lanes"), Embree, no records, no
-    splitting, no primary samples, no guide (an empty GuideState)."""
-    if ctx.path_loop != "lanes" or ctx.accel.name != "embree" or record or split is not None:
+    primary samples. (A guide's maps and roulette are shade_vertex's: with them every vertex goes
+    to the general kernel, fast_allowed; its splitting is split_lanes'.)"""
+    if ctx.path_loop != "lanes" or ctx.accel.name != "embree" or record:
         return False
-    if ps is not None and np.any(ps.col >= 0):
-        return False
-    gs = ctx.guide_state
-    return not (gs.res[0] > 0 or gs.pixel_slot.shape[0] > 0 or gs.rr_late != 0)
+    return ps is None or not np.any(ps.col >= 0)
+
+
+def fast_allowed(gs):
+    """Whether the fast class may shade under the GuideState gs: no maps, and the path tracer's own
+    roulette (survival min(max(beta), 0.95), drawn before the sampled ray), which it hard-codes."""
+    return (gs.res[0] == 0 and gs.pixel_slot.shape[0] == 0 and gs.rr_late == 0 and gs.rr_min == 0.0
+            and gs.rr_max == RR_MAX)
+
+
+@jit
+def _fold(k):
+    """The lanes' 32-bit key of a path's 64-bit one."""
+    k = np.uint64(k)
+    return np.int32(np.uint32((k ^ (k >> np.uint64(32))) & np.uint64(0xFFFFFFFF)))
+
+
+@kernel
+def split_lanes(lf, li, m, hit, prim, tri, tri_normal, state, gs, plan, ks, parent, n_slots, capacity):
+    """The splitting and weight window of a guide's final passes (splitting.SplitPlan `plan`) on
+    lanes 0 .. m-1 after their hits, as splitting.split_counts and split_paths do it on the
+    wavefront. ks[k] gets lane k's copies from split_count: 0 where the window ended the path
+    (classify then leaves the lane unshaded and compact sends its radiance out), its throughput
+    and gain divided where the window's roulette kept it. A lane split in c copies takes c - 1
+    new lanes from m on and path slots from n_slots on, in lane order (fewer where fewer are left
+    below `capacity`, or lanes below lf's width), each with the lane's rows and hit, its own key
+    (rng.split_key), no radiance and parent = the slot it adds into (ks 1); the throughputs and
+    gains are divided by c. The wave's PathState `state` must hold the lanes' throughput, gain and
+    depth (every vertex general: shade_general keeps them). Returns (lanes, path slots, ended)."""
+    beta = state.beta
+    gain = state.gain
+    L = state.L
+    depth = state.depth
+    prev_pdf = state.prev_pdf
+    prev_delta = state.prev_delta
+    key = state.key
+    pix = state.pix
+    prev_rec = state.prev_rec
+    outgoing = plan.outgoing
+    pixel_est = plan.pixel_est
+    hi = plan.hi
+    low = plan.low
+    threshold = plan.threshold
+    slot = li[SLOT, :m]
+    ray_d = lf[DX:DZ + 1, :m].T
+    b1 = hit[1, :m]
+    b2 = hit[2, :m]
+    counts = np.zeros((_CHUNKS + 1, 2), np.int64)  # per chunk: copies wanted, lanes ended
+    for c in prange(_CHUNKS):
+        want = 0
+        gone = 0
+        for k in range(c * m // _CHUNKS, (c + 1) * m // _CHUNKS):
+            cnt = split_count(k, slot, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing,
+                              pixel_est, hi, low, threshold)
+            ks[k] = cnt
+            i = slot[k]
+            for q in range(3):
+                lf[BR + q, k] = beta[i, q]  # as the window's roulette left it
+            if cnt > 1:
+                want += cnt - 1
+            elif cnt == 0:
+                gone += 1
+        counts[c + 1, 0] = want
+        counts[c + 1, 1] = gone
+    for c in range(_CHUNKS):
+        counts[c + 1, 0] += counts[c, 0]
+        counts[c + 1, 1] += counts[c, 1]
+    room = min(capacity - n_slots, lf.shape[1] - PAD - m, counts[_CHUNKS, 0])
+    nf = lf.shape[0]
+    ni = li.shape[0]
+    for c in prange(_CHUNKS):
+        off = counts[c, 0]  # copies wanted by the lanes before this one
+        for k in range(c * m // _CHUNKS, (c + 1) * m // _CHUNKS):
+            want = ks[k] - 1
+            if want <= 0:
+                continue
+            made = min(want, max(room - off, 0))
+            first = off
+            off += want
+            if made == 0:
+                continue
+            i = slot[k]
+            share = made + 1
+            for q in range(3):
+                beta[i, q] /= share
+                lf[BR + q, k] = beta[i, q]
+            gain[i] /= share
+            for j in range(1, share):
+                e = m + first + j - 1
+                s = n_slots + first + j - 1
+                for r in range(nf):
+                    lf[r, e] = lf[r, k]
+                for r in range(ni):
+                    li[r, e] = li[r, k]
+                for r in range(3):
+                    hit[r, e] = hit[r, k]
+                    lf[LR + r, e] = 0.0
+                prim[e] = prim[k]
+                ks[e] = 1
+                make_copy(i, s, j, beta, gain, L, depth, prev_pdf, prev_delta, key, pix, prev_rec, parent)
+                li[SLOT, e] = s
+                li[KEY, e] = _fold(key[s])
+    made_all = min(room, counts[_CHUNKS, 0])
+    return m + made_all, n_slots + made_all, counts[_CHUNKS, 1]
 
 
 def _lane_scene(ctx):
@@ -275,8 +382,24 @@ def start(ray_o, ray_d, centre, state, lf, li):
         li[SLOT, i] = np.int32(i)
         li[DEPTH, i] = np.int32(depth[i])
         li[DELTA, i] = np.int32(1) if prev_delta[i] else np.int32(0)
-        k = np.uint64(key[i])
-        li[KEY, i] = np.int32(np.uint32((k ^ (k >> np.uint64(32))) & np.uint64(0xFFFFFFFF)))
+        li[KEY, i] = _fold(key[i])
+
+
+@jit(inline="always")
+def put_ray(buf, ib, k, rows, o, d, i, tfar):
+    """Lane k of the packet in scratch row `buf` (ib: the same row as int32): the ray of lane i of
+    `rows`, its origin in rows o .. o+2 and its direction in d .. d+2, from 0 to tfar; valid."""
+    L = _LANES
+    for q in range(3):
+        buf[q * L + k] = rows[o + q, i]
+        buf[(4 + q) * L + k] = rows[d + q, i]
+    buf[3 * L + k] = 0.0
+    buf[7 * L + k] = 0.0
+    buf[8 * L + k] = tfar
+    ib[9 * L + k] = -1
+    ib[10 * L + k] = 0
+    ib[11 * L + k] = 0
+    ib[_VALID * L + k] = -1
 
 
 @kernel
@@ -298,20 +421,7 @@ def intersect(fn, scene, scratch, lf, n, hit, prim):
                 ib[18 * L + k] = -1
                 ib[_VALID * L + k] = 0
             for k in range(m):
-                i = base + k
-                buf[k] = lf[OX, i]
-                buf[L + k] = lf[OY, i]
-                buf[2 * L + k] = lf[OZ, i]
-                buf[3 * L + k] = 0.0
-                buf[4 * L + k] = lf[DX, i]
-                buf[5 * L + k] = lf[DY, i]
-                buf[6 * L + k] = lf[DZ, i]
-                buf[7 * L + k] = 0.0
-                buf[8 * L + k] = np.inf
-                ib[9 * L + k] = -1
-                ib[10 * L + k] = 0
-                ib[11 * L + k] = 0
-                ib[_VALID * L + k] = -1
+                put_ray(buf, ib, k, lf, OX, DX, base + k, np.float32(np.inf))
             call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
             for k in range(m):
                 i = base + k
@@ -325,12 +435,13 @@ def intersect(fn, scene, scratch, lf, n, hit, prim):
 
 
 @kernel
-def classify(lf, li, n, hit, prim, tl, nrm, alb, emit, escape_fast, state, fast_lane, general):
-    """Mark the lanes 0 .. n-1 whose vertex is of the fast class (fast_lane: a hit on a triangle
-    with tl[TL_FAST], or an escape where escape_fast) and list the others, in order, in `general`;
-    returns how many were listed. For the fast ones it writes what shade_vertex writes into the
-    wave's PathState `state` besides the path: at the camera ray's hit the AOVs' normal (facing the
-    camera) and distance and L_cam, the light the camera sees; the albedo at the first vertex
+def classify(lf, li, n, hit, prim, tl, geo, alb, emit, use_fast, escape_fast, state, ks, flags, fast_lane, general):
+    """Mark the lanes 0 .. n-1 whose vertex is of the fast class (fast_lane: with use_fast, a hit on
+    a triangle with tl[TL_FAST], or an escape where escape_fast) and list the others, in order, in `general`;
+    returns how many were listed. A lane with ks 0 (split_lanes: the weight window ended its path)
+    is neither: flags say it ends and has no shadow ray. For the fast ones it writes what shade_vertex writes into the
+    wave's PathState `state` besides the path: at the camera ray's hit the AOVs' shading normal
+    (on the camera's side of the surface) and distance and L_cam, the light the camera sees; the albedo at the first vertex
     that is not a delta BSDF (aov_open)."""
     aov = state.aov
     aov_open = state.aov_open
@@ -340,8 +451,12 @@ def classify(lf, li, n, hit, prim, tl, nrm, alb, emit, escape_fast, state, fast_
         g = 0
         for k in range(c * n // _CHUNKS, (c + 1) * n // _CHUNKS):
             p = prim[k]
-            fast = tl[TL_FAST, p] > 0.0 if p >= 0 else escape_fast
+            fast = use_fast and (tl[TL_FAST, p] > 0.0 if p >= 0 else escape_fast)
             fast_lane[k] = np.int32(1) if fast else np.int32(0)
+            if ks[k] == 0:
+                flags[ALIVE, k] = 0
+                flags[SHADOW, k] = 0
+                continue
             if not fast:
                 g += 1
                 continue
@@ -353,11 +468,24 @@ def classify(lf, li, n, hit, prim, tl, nrm, alb, emit, escape_fast, state, fast_
                         L_cam[i, q] = 0.0
                 continue
             if first:
-                cos_o = -(lf[DX, k] * nrm[0, p] + lf[DY, k] * nrm[1, p] + lf[DZ, k] * nrm[2, p])
+                cos_o = -(lf[DX, k] * geo[G_N, p] + lf[DY, k] * geo[G_N + 1, p] + lf[DZ, k] * geo[G_N + 2, p])
                 sgn = 1.0 if cos_o >= 0.0 else -1.0
                 lit = 1.0 if cos_o > 0.0 else 0.0
+                b1 = np.float64(hit[1, k])
+                b2 = np.float64(hit[2, k])
+                b0 = 1.0 - b1 - b2
+                ns = np.empty(3)
                 for q in range(3):
-                    aov[i, 3 + q] = sgn * nrm[q, p]
+                    ns[q] = b0 * geo[G_VN + q, p] + b1 * geo[G_VN + 3 + q, p] + b2 * geo[G_VN + 6 + q, p]
+                c2 = ns[0] * ns[0] + ns[1] * ns[1] + ns[2] * ns[2]
+                towards = ns[0] * geo[G_N, p] + ns[1] * geo[G_N + 1, p] + ns[2] * geo[G_N + 2, p]
+                for q in range(3):
+                    if c2 > 0.0 and math.isfinite(c2):
+                        ns[q] = ns[q] / math.sqrt(c2) * (-1.0 if towards < 0.0 else 1.0)
+                    else:
+                        ns[q] = geo[G_N + q, p]
+                for q in range(3):
+                    aov[i, 3 + q] = sgn * ns[q]
                     L_cam[i, q] = lf[BR + q, k] * emit[q, p] * lit
                 aov[i, 6] = hit[0, k]
             if aov_open[i]:
@@ -370,7 +498,7 @@ def classify(lf, li, n, hit, prim, tl, nrm, alb, emit, escape_fast, state, fast_
     for c in prange(_CHUNKS):
         j = counts[c]
         for k in range(c * n // _CHUNKS, (c + 1) * n // _CHUNKS):
-            if fast_lane[k] == 0:
+            if fast_lane[k] == 0 and ks[k] != 0:
                 general[j] = k
                 j += 1
     return counts[_CHUNKS]
@@ -429,7 +557,7 @@ def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, p
 
 
 @kernel(fastmath={"arcp", "contract", "nsz"})
-def shade(lf, li, n, hit, prim, sh, flags, fast_lane, tri, nrm, alb, emit, tl, alias_p, alias_i, lim):
+def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, alb, emit, tl, alias_p, alias_i, lim):
     """Shade the vertex each lane 0 .. n-1 of the fast class (fast_lane) hit (prim -1: escaped, the
     path ends): emission with its MIS weight (full without NEE or after a delta bounce) into the
     lane's radiance; with NEE (lim[L_NEE]) a light sample with MIS into the shadow rows
@@ -439,7 +567,9 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, tri, nrm, alb, emit, tl, a
     branch, or a load after a store, keeps LLVM from packing the loop); their other rows are
     scratch until shade_general, which runs next, writes them. lim: int32
     rr_depth, max_depth (< 0: none), nee, the emissive triangles' count; the scene's rows as
-    LaneScene's."""
+    LaneScene's. With corner normals the vertex is shaded in the frame of the interpolated normal,
+    and a direction on the other side of the true surface than wo gets nothing (a light leak only
+    shading normals make possible, as material.crosses)."""
     rr_depth = lim[L_RR]
     max_depth = lim[L_MAX]
     nee = lim[L_NEE] != 0
@@ -452,14 +582,29 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, tri, nrm, alb, emit, tl, a
         pc = p if hit_ok else 0
         dx, dy, dz = lf[DX, k], lf[DY, k], lf[DZ, k]
         t, b1, b2 = hit[0, k], hit[1, k], hit[2, k]
-        x0 = tri[0, pc] + b1 * tri[3, pc] + b2 * tri[6, pc]
-        x1 = tri[1, pc] + b1 * tri[4, pc] + b2 * tri[7, pc]
-        x2 = tri[2, pc] + b1 * tri[5, pc] + b2 * tri[8, pc]
-        nx, ny, nz = nrm[0, pc], nrm[1, pc], nrm[2, pc]
+        x0 = geo[0, pc] + b1 * geo[3, pc] + b2 * geo[6, pc]
+        x1 = geo[1, pc] + b1 * geo[4, pc] + b2 * geo[7, pc]
+        x2 = geo[2, pc] + b1 * geo[5, pc] + b2 * geo[8, pc]
+        nx, ny, nz = geo[G_N, pc], geo[G_N + 1, pc], geo[G_N + 2, pc]
         cos_o = -(dx * nx + dy * ny + dz * nz)
         sgn = ONE if cos_o >= ZERO else -ONE
-        fx, fy, fz = nx * sgn, ny * sgn, nz * sgn
-        black = (tl[TL_ONE_SIDED, pc] > ZERO) & (cos_o < ZERO)  # a one-sided surface seen from behind
+        fx, fy, fz = nx * sgn, ny * sgn, nz * sgn  # the true normal on the side the path arrived
+        # the shading normal: the corner normals interpolated, in ng's hemisphere (ng where they vanish)
+        b0 = ONE - b1 - b2
+        snx = b0 * geo[G_VN, pc] + b1 * geo[G_VN + 3, pc] + b2 * geo[G_VN + 6, pc]
+        sny = b0 * geo[G_VN + 1, pc] + b1 * geo[G_VN + 4, pc] + b2 * geo[G_VN + 7, pc]
+        snz = b0 * geo[G_VN + 2, pc] + b1 * geo[G_VN + 5, pc] + b2 * geo[G_VN + 8, pc]
+        c2 = snx * snx + sny * sny + snz * snz
+        has_n = (c2 > ZERO) & (c2 < F(np.inf))
+        inv_n = ONE / math.sqrt(c2 if has_n else ONE)
+        inv_n = -inv_n if (snx * nx + sny * ny + snz * nz) < ZERO else inv_n
+        snx = snx * inv_n if has_n else nx
+        sny = sny * inv_n if has_n else ny
+        snz = snz * inv_n if has_n else nz
+        wo_z = -(dx * snx + dy * sny + dz * snz)
+        ssg = ONE if wo_z >= ZERO else -ONE
+        sx, sy, sz = snx * ssg, sny * ssg, snz * ssg  # the shading normal on wo's side
+        black = (tl[TL_ONE_SIDED, pc] > ZERO) & (wo_z <= ZERO)  # a one-sided surface seen from behind
         ar = ZERO if black else alb[0, pc]
         ag = ZERO if black else alb[1, pc]
         ab = ZERO if black else alb[2, pc]
@@ -488,15 +633,16 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, tri, nrm, alb, emit, tl, a
         su = math.sqrt(rand32(key, base + D_POS))
         lb1 = ONE - su
         lb2 = rand32(key, base + D_POS + 1) * su
-        wx = tri[0, lj] + lb1 * tri[3, lj] + lb2 * tri[6, lj] - x0
-        wy = tri[1, lj] + lb1 * tri[4, lj] + lb2 * tri[7, lj] - x1
-        wz = tri[2, lj] + lb1 * tri[5, lj] + lb2 * tri[8, lj] - x2
+        wx = geo[0, lj] + lb1 * geo[3, lj] + lb2 * geo[6, lj] - x0
+        wy = geo[1, lj] + lb1 * geo[4, lj] + lb2 * geo[7, lj] - x1
+        wz = geo[2, lj] + lb1 * geo[5, lj] + lb2 * geo[8, lj] - x2
         d2 = max(wx * wx + wy * wy + wz * wz, TINY)
         inv_d = ONE / math.sqrt(d2)
         wx, wy, wz = wx * inv_d, wy * inv_d, wz * inv_d
-        cos_l = -(wx * nrm[0, lj] + wy * nrm[1, lj] + wz * nrm[2, lj])
-        cos_s = wx * fx + wy * fy + wz * fz
-        ok = on & nee & (n_lights > 0) & (cos_l > ZERO) & (cos_s > ZERO)
+        cos_l = -(wx * geo[G_N, lj] + wy * geo[G_N + 1, lj] + wz * geo[G_N + 2, lj])
+        cos_s = wx * sx + wy * sy + wz * sz
+        same_side = (wx * fx + wy * fy + wz * fz) > ZERO
+        ok = on & nee & (n_lights > 0) & (cos_l > ZERO) & (cos_s > ZERO) & same_side
         pls = tl[TL_SEL, lj] * d2 / max(tl[TL_AREA, lj] * cos_l, TINY)
         pb = cos_s * INV_PI
         g = (pb * pls / max(pls * pls + pb * pb, TINY)) if ok else ZERO  # f cos / p_light x the power heuristic
@@ -511,24 +657,25 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, tri, nrm, alb, emit, tl, a
         sh[SR, k], sh[SG, k], sh[SB, k] = sr, sg, sb
         flags[SHADOW, k] = np.int32(1) if (sr + sg + sb) > ZERO else np.int32(0)
 
-        # the cosine bounce, in the frame of the arrival side's normal (Duff et al. 2017)
+        # the cosine bounce, in the frame of the shading normal on wo's side (Duff et al. 2017)
         u2 = rand32(key, base + D_DIR)
         c, s = sincos2pi(rand32(key, base + D_DIR + 1))
         r = math.sqrt(u2)
         lx, ly = r * c, r * s
         lz = math.sqrt(max(ZERO, ONE - u2))
-        sg_z = ONE if fz >= ZERO else -ONE
-        a = -ONE / (sg_z + fz)
-        bq = fx * fy * a
-        wix = (ONE + sg_z * fx * fx * a) * lx + bq * ly + fx * lz
-        wiy = sg_z * bq * lx + (sg_z + fy * fy * a) * ly + fy * lz
-        wiz = -sg_z * fx * lx - fy * ly + fz * lz
+        sg_z = ONE if sz >= ZERO else -ONE
+        a = -ONE / (sg_z + sz)
+        bq = sx * sy * a
+        wix = (ONE + sg_z * sx * sx * a) * lx + bq * ly + sx * lz
+        wiy = sg_z * bq * lx + (sg_z + sy * sy * a) * ly + sy * lz
+        wiz = -sg_z * sx * lx - sy * ly + sz * lz
+        leaves = (wix * fx + wiy * fy + wiz * fz) > ZERO  # on the side of the true surface it arrived
         nbr, nbg, nbb = br * ar, bg * ag, bb * ab
         nmax = max(nbr, max(nbg, nbb))
 
         # the roulette of the new bounce, and the bounce cap
-        qq = min(nmax, F(0.95)) if depth + 1 >= rr_depth else ONE
-        go = on & (lz > ZERO) & (nmax > ZERO) & (rand32(key, base + D_RR) < qq) & (depth + 1 < MAX_BOUNCES)
+        qq = min(nmax, F(RR_MAX)) if depth + 1 >= rr_depth else ONE
+        go = on & (lz > ZERO) & leaves & (nmax > ZERO) & (rand32(key, base + D_RR) < qq) & (depth + 1 < MAX_BOUNCES)
         inv_q = ONE / max(qq, TINY)
         lf[OX, k], lf[OY, k], lf[OZ, k] = ox, oy, oz
         lf[DX, k] = wix if fast else dx
@@ -560,19 +707,7 @@ def occlude(fn, scene, scratch, n, sh, flags, lf):
         hi = (c + 1) * n // nch
         for i in range(c * n // nch, hi + 1):
             if i < hi and flags[SHADOW, i] != 0:
-                buf[f] = sh[SOX, i]
-                buf[L + f] = sh[SOY, i]
-                buf[2 * L + f] = sh[SOZ, i]
-                buf[3 * L + f] = 0.0
-                buf[4 * L + f] = sh[SDX, i]
-                buf[5 * L + f] = sh[SDY, i]
-                buf[6 * L + f] = sh[SDZ, i]
-                buf[7 * L + f] = 0.0
-                buf[8 * L + f] = sh[TMAX, i]
-                ib[9 * L + f] = -1
-                ib[10 * L + f] = 0
-                ib[11 * L + f] = 0
-                ib[_VALID * L + f] = -1
+                put_ray(buf, ib, f, sh, SOX, SDX, i, sh[TMAX, i])
                 lane[f] = i
                 f += 1
             if f == L or (i == hi and f > 0):
@@ -650,26 +785,32 @@ def compact(lf, li, n, flags, L, hole, mover):
     return m
 
 
-def run(ctx, buf, n, ps, stats):
+def run(ctx, buf, n, ps, stats, split=None):
     """Trace the n paths the source started in `buf` (wave.WaveBuffers; ps: the source's
     rng.PrimarySamples, supplying none) to their end on the lanes: each path's radiance into
-    buf.L, its AOVs and L_cam, as the other path loops leave them. stats.trace_parts gets the
-    seconds of the ray queries, the shading (both classes) and the rest; stats.lane_samples the
-    paths, stats.lane_general the vertices the general kernel shaded."""
+    buf.L, its AOVs and L_cam, as the other path loops leave them; split: a splitting.SplitPlan
+    (buf made with split=True) or None. stats.trace_parts gets the seconds of the ray queries, the
+    shading (both classes) and the rest; stats.lane_samples the paths, stats.lane_general the
+    vertices the general kernel shaded."""
     t0 = time.perf_counter()
     ls = _lane_scene(ctx)
     lanes = getattr(buf, "_lanes", None)
-    if lanes is None or lanes.size < n:
-        lanes = buf._lanes = LaneBuffers(buf.size)
+    if lanes is None or lanes.size < buf.capacity:
+        lanes = buf._lanes = LaneBuffers(buf.capacity)
     accel = ctx.accel
     scene, _, centre, _, scratch = accel.packet_args()
     lim = np.array([ctx.rr_depth, ctx.max_depth, int(ctx.nee), ls.n_lights], np.int32)
     limits = (ctx.max_depth, ctx.rr_depth, ctx.nee)
     state = buf.path_state(n)
-    rays = shadows = general = 0
+    splitting = split is not None and buf.capacity > buf.size
+    use_fast = fast_allowed(ctx.guide_state) and not splitting  # split_lanes reads the PathState
+    n_slots = n
+    rays = shadows = general = ended = 0
     part = dict.fromkeys(TRACE_PARTS, 0.0)  # seconds of each step
     clock = time.perf_counter
     lf, li, flags = lanes.f, lanes.i, lanes.flags
+    if not splitting:
+        lanes.ks[:n] = 1  # no lane ends by the window
     with _NumbaThreads(accel.threads):
         t = clock()
         start(buf.ray_o[:n], buf.ray_d[:n], centre, state, lf, li)
@@ -682,14 +823,21 @@ def run(ctx, buf, n, ps, stats):
             rays += m
             t2 = clock()
             part["intersect"] += t2 - t1
+            if splitting:
+                m, n_slots, e = split_lanes(lf, li, m, lanes.hit, lanes.prim, ctx.surfaces.tri, ctx.tri_normal, state,
+                                            ctx.guide_state, split, lanes.ks, buf.parent, n_slots, buf.capacity)
+                ended += e
+                t = clock()
+                part["rest"] += t - t2
+                t2 = t
             ng = 0
-            if first or not ls.all_fast:  # in a scene all fast, only the camera rays' hits (AOVs) need it
-                ng = int(classify(lf, li, m, lanes.hit, lanes.prim, ls.tl, ls.nrm, ls.alb, ls.emit, ls.escape_fast,
-                                  state, lanes.fast, lanes.general))
+            if first or not (ls.all_fast and use_fast):  # else only the camera rays' hits (AOVs) need it
+                ng = int(classify(lf, li, m, lanes.hit, lanes.prim, ls.tl, ls.geo, ls.alb, ls.emit, use_fast,
+                                  ls.escape_fast, state, lanes.ks, flags, lanes.fast, lanes.general))
                 first = False
-            if ng < m:
-                shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.tri, ls.nrm, ls.alb,
-                      ls.emit, ls.tl, ls.alias_p, ls.alias_i, lim)
+            if use_fast and ng < m:
+                shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.alb, ls.emit,
+                      ls.tl, ls.alias_p, ls.alias_i, lim)
             if ng:
                 shade_general(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.general[:ng], centre,
                               ctx.surfaces, ctx.lights, ctx.guide_state, ps, limits, state)
@@ -701,6 +849,10 @@ def run(ctx, buf, n, ps, stats):
             part["occluded"] += t - t3
             m = int(compact(lf, li, m, flags, buf.L, lanes.hole, lanes.mover))
         part["rest"] += clock() - t
+    if n_slots > n:
+        merge_copies(buf.L, buf.parent, n, n_slots)
+    stats.split_copies += n_slots - n
+    stats.window_ended += ended
     stats.rays += rays
     stats.shadow_rays += shadows
     stats.lane_samples += n

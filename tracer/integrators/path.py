@@ -211,8 +211,8 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
     limits = (ctx.max_depth, ctx.rr_depth, ctx.nee)
     state, out, shadow, queue = buf.path_state(), buf.continuation(), buf.shadow_rays(), buf.shadow_queue()
     t0 = stats.tick("camera", t0)
-    if engine is not None and engine.usable(ctx, record, split if splitting else None, ps):
-        engine.run(ctx, buf, n, ps, stats)
+    if engine is not None and engine.usable(ctx, record, ps):
+        engine.run(ctx, buf, n, ps, stats, split if splitting else None)
         n_active = 0
         t0 = time.perf_counter()
     elif thread_loop is not None and thread_loop.usable(ctx, record):
