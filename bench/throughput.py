@@ -212,7 +212,8 @@ def main(argv=None):
     p.add_argument("--width", type=int, default=None, help="default: the scene's (256 for the Cornell box)")
     p.add_argument("--height", type=int, default=None)
     p.add_argument("--threads", type=int, default=None)
-    p.add_argument("--path-loops", default="thread", help="comma-separated: thread (per-thread loop), wave (wavefront)")
+    p.add_argument("--path-loops", default="thread",
+                   help="comma-separated: thread (per-thread loop), wave (wavefront), lanes (tracer.engine)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per scene and accel (best is reported)")
     p.add_argument("--json", default=None, help="write the records to this file (default: bench/results/"
                                                 "throughput.json, throughput_vs_mitsuba.json or throughput_load.json)")

@@ -6,10 +6,11 @@ name here. A bounce runs these kernels over lanes 0 .. m-1:
 
 - `intersect`: closest hits, 16 lanes to one rtcIntersect16 (Embree's float32 hit, no float64
   refinement: the hit point is rebuilt from the barycentrics, on the triangle's plane);
+- `split_lanes` (a guide's final passes with splitting or the weight window): copies appended
+  as new lanes, lanes the window ended marked;
 - `classify`: which lanes' vertices are of the fast class (a diffuse triangle without textures or
   opacity, flat or with corner normals, in a scene lit by triangles only; or an escape with no
-  environment),
-  their AOVs and L_cam; the others listed for the general kernel;
+  environment), their AOVs and L_cam; the others listed for the general kernel;
 - `shade`: the fast class, one `prange` over the lanes that LLVM packs 8 or 16 to an instruction
   (the body holds no helper that takes arrays and no `and` chain, integers stay 32-bit:
   docs/throughput.md; the other lanes keep what the general kernel reads): emission with its
@@ -27,9 +28,9 @@ random numbers from a 32-bit hash of the path's key folded to 32 bits and the di
 other path loops do: the images agree with theirs in expectation, not bit for bit
 (tests/test_engine.py z-tests them).
 
-What a wave needs to run here (`usable`): Embree, and a pass that neither records, splits nor
-takes primary samples (a guide's final passes without splitting included: under a guide's maps
-every vertex goes to the general kernel).
+What a wave needs to run here (`usable`): Embree, and a pass that neither records nor takes
+external primary samples. A guide's final passes run here too: under its maps every vertex goes
+to the general kernel (`fast_allowed`).
 """
 import math
 import time
