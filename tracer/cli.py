@@ -69,8 +69,8 @@ def _parser():
     p.add_argument("--accel", default="embree", help=f"ray queries: {' or '.join(ACCELS)} (default embree)")
     p.add_argument("--path-loop", default="thread", metavar="LOOP",
                    help="thread (default: each thread's packets of paths to their end), wave (one kernel per stage) "
-                        "or lanes (float32 lanes, tracer.engine: plain path tracing of diffuse scenes lit by area "
-                        "lights; the rest runs on thread)")
+                        "or lanes (float32 lanes, tracer.engine: every pass that records nothing, a guide's final "
+                        "passes included; its training passes run on thread)")
     p.add_argument("--filter", default="box", help="pixel filter: box (default) or point (pixel centres)")
     p.add_argument("--crop", help="render only the window x0,y0,w,h of the image")
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")

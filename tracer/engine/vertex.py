@@ -67,8 +67,9 @@ def shade_vertex(i, wray, tk, p, u1, u2, surf, lt, gs, ps, max_depth, rr_depth, 
     p (< 0: escaped) at barycentrics u1, u2: emission (added to L, and L_cam at the first hit),
     AOVs, the NEE sample, the continuation from the mixture and the roulette (the path state of
     slot i updated). Returns a Vertex: the next ray and shadow ray to trace, and what a record of
-    the vertex takes. Arguments as `shade`'s; the callers are the wavefront's `shade` and the
-    per-thread loop of tracer.integrators.thread_loop (at most 30 arguments: Python passes more
+    the vertex takes. Arguments as the wavefront's `shade` (tracer.integrators.path); the callers
+    are that `shade`, the per-thread loop of tracer.integrators.thread_loop and the lanes' general
+    kernel (engine.lanes.shade_general) (at most 30 arguments: Python passes more
     as *args, which Numba can neither inline nor call without copying every array)."""
     alive = False
     no = wray
