@@ -397,7 +397,7 @@ def compile_plan(guided, integ, accel, path_loop="thread"):
     render, to say that a compile is coming."""
     names = list(integ.kernels())
     if path_loop == "lanes" and "thread_loop.trace_paths" in names and accel == "embree":
-        names += ["lanes.shade", "lanes.shade_general"]
+        names += ["lanes.shade", "general.shade_general"]
     if guided or (("thread_loop.trace_paths" in names) and (accel != "embree" or path_loop == "wave")):
         names = [n for n in names if n != "thread_loop.trace_paths"] + ["path.shade"]
         if guided and accel == "embree" and path_loop != "wave":

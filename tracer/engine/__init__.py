@@ -8,7 +8,8 @@
   The integrators reach it through `lanes.usable(ctx, record, ps)` and
   `lanes.run(ctx, buf, n, ps, stats, split)`, which trace a wave that a source started in a
   wave.WaveBuffers (splitting it by a splitting.SplitPlan) and leave each path's radiance and
-  AOVs in it, as the other path loops do.
+  AOVs in it, as the other path loops do. `rows` declares the lanes' state; `general` holds the
+  kernel that shades the vertices outside the fast class.
 
 Nothing here imports tracer.integrators, tracer.gradient or a guide beyond its contract.
 """

@@ -1,8 +1,8 @@
 """A wave of paths as float32 lanes: rows of float32 and int32 matrices, [field, lane].
 
-The lane state is declared once (FLOAT_ROWS, INT_ROWS, FLAG_ROWS): `LaneBuffers` allocates it
+The lane state is declared once (engine.rows: FLOAT_ROWS, INT_ROWS, FLAG_ROWS): `LaneBuffers` allocates it
 from the declaration, and `compact` copies a lane by copying every row, so a new field is one
-name here. A bounce runs these kernels over lanes 0 .. m-1:
+name there. A bounce runs these kernels over lanes 0 .. m-1:
 
 - `intersect`: closest hits, 16 lanes to one rtcIntersect16 (Embree's float32 hit, no float64
   refinement: the hit point is rebuilt from the barycentrics, on the triangle's plane);
@@ -16,7 +16,7 @@ name here. A bounce runs these kernels over lanes 0 .. m-1:
   docs/throughput.md; the other lanes keep what the general kernel reads): emission with its
   MIS weight, a light sample with MIS (alias table, a point uniform on the triangle), a cosine
   bounce, the roulette;
-- `shade_general`: the listed lanes, each through engine.vertex.shade_vertex in float64 (every
+- `shade_general` (engine.general): the listed lanes, each through engine.vertex.shade_vertex in float64 (every
   material, texture and light), its results written into the lanes;
 - `occlude`: the shadow rays of both, packed 16 to one rtcOccluded16, adding the unblocked ones;
 - `compact`: the ended paths' radiance out to the wave's path slots (float64), and the lanes
@@ -45,33 +45,12 @@ from ..bvh.numba_bvh import _NumbaThreads
 from ..lights import ENV_NONE
 from ..splitting import make_copy, merge_copies, split_count
 from ..wave import TRACE_PARTS
-from .vertex import MAX_BOUNCES, shade_vertex
+from .general import shade_general
+from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, FLAG_ROWS, FLOAT_ROWS, G_N, G_VN, INT_ROWS, KEY, LB, LG,
+                   LR, OX, OY, OZ, PAD, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SHADOW_ROWS, SLOT, SOX, SOY, SOZ, SR,
+                   TL_AREA, TL_EPS, TL_FAST, TL_ONE_SIDED, TL_SEL, TMAX, _rows)
+from .vertex import MAX_BOUNCES
 
-# The lane state, declared once: rows of the float32 and int32 matrices. The ray (origin relative
-# to the accel's centre, unit direction), the throughput, the radiance so far, the density of the
-# last sampled direction; the wave's path slot, the bounces so far, the 32-bit key, whether the
-# last direction came from a delta lobe (or the camera).
-FLOAT_ROWS = ("ox", "oy", "oz", "dx", "dy", "dz", "br", "bg", "bb", "lr", "lg", "lb", "pdf")
-INT_ROWS = ("slot", "depth", "key", "delta")
-OX, OY, OZ, DX, DY, DZ, BR, BG, BB, LR, LG, LB, PDF = range(len(FLOAT_ROWS))
-SLOT, DEPTH, KEY, DELTA = range(len(INT_ROWS))
-# A bounce's flags (int32): the path goes on, it has a shadow ray. (Whether the vertex is of the
-# fast class is an array of its own, LaneBuffers.fast: the fast kernel reads it, and a loop that
-# reads one row of an array and writes others is left scalar by LLVM.)
-FLAG_ROWS = ("alive", "shadow")
-ALIVE, SHADOW = range(len(FLAG_ROWS))
-# A bounce's shadow rays: origin, unit direction, tmax, the value it adds if unblocked
-SHADOW_ROWS = ("sox", "soy", "soz", "sdx", "sdy", "sdz", "tmax", "sr", "sg", "sb")
-SOX, SOY, SOZ, SDX, SDY, SDZ, TMAX, SR, SG, SB = range(len(SHADOW_ROWS))
-# The scene's rows per triangle: geo (the corner v0, the edges e1, e2, the geometric normal, the
-# corner normals vn0, vn1, vn2: three rows each) and tl (TL_SEL, TL_AREA, TL_EPS, TL_ONE_SIDED, TL_FAST)
-G_V0, G_E1, G_E2, G_N, G_VN = 0, 3, 6, 9, 12
-TL_SEL, TL_AREA, TL_EPS, TL_ONE_SIDED, TL_FAST = range(5)
-
-# Rows are this many lanes longer than they need be: rows a power of two long lie a multiple of
-# 4 KiB apart, and a loop that touches 13 of them at once then maps them to the same cache sets
-# (measured on the start kernel: 27 ns a lane unpadded, 5 ns padded)
-PAD = 16
 _CHUNKS = 64  # compaction: chunks counted, then written at their offsets
 
 F = np.float32
@@ -93,6 +72,7 @@ BOUNCE, BLOCK = 2, 8
 D_DIR, D_LIGHT, D_POS, D_RR = 0, 4, 5, 7
 # lim's entries
 L_RR, L_MAX, L_NEE, L_LIGHTS = range(4)
+
 
 
 @jit(inline="always")
@@ -137,11 +117,6 @@ class LaneBuffers:
         self.fast = np.zeros(size, np.int32)  # the lane's vertex is of the fast class
         self.general = np.zeros(size, np.int32)  # the lanes the general kernel shades
         self.ks = np.ones(size, np.int64)  # split_lanes: copies of each lane (0: the window ended it)
-
-
-def _rows(rows, n, dtype):
-    """(rows, n + PAD) zeros: rows for n lanes, a padded stride apart (PAD)."""
-    return np.zeros((rows, n + PAD), dtype)
 
 
 def _as_rows(a, dtype):
@@ -503,58 +478,6 @@ def classify(lf, li, n, hit, prim, tl, geo, alb, emit, use_fast, escape_fast, st
                 general[j] = k
                 j += 1
     return counts[_CHUNKS]
-
-
-@kernel
-def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, ps, limits, state):
-    """Shade the vertex of each lane general[0 .. ] (classify's list) with engine.vertex.shade_vertex
-    in float64, on the wave's PathState `state` (its path slot's row, loaded from the lane first:
-    throughput, depth, the last direction's density and delta flag), and write back into the lane
-    what the fast kernel writes: the next ray, the throughput, depth, density and delta flag after
-    it, flags[ALIVE], the shadow ray (flags[SHADOW], its value with the throughput in). The
-    emission it finds goes into the slot's radiance directly. limits: (max_depth, rr_depth, nee)."""
-    max_depth = limits[0]
-    rr_depth = limits[1]
-    nee = limits[2]
-    beta = state.beta
-    L = state.L
-    L_cam = state.L_cam
-    depth = state.depth
-    prev_pdf = state.prev_pdf
-    prev_delta = state.prev_delta
-    gain = state.gain
-    key = state.key
-    pix = state.pix
-    aov = state.aov
-    aov_open = state.aov_open
-    for j in prange(general.shape[0]):
-        k = general[j]
-        i = li[SLOT, k]
-        for q in range(3):
-            beta[i, q] = lf[BR + q, k]
-        depth[i] = li[DEPTH, k]
-        prev_pdf[i] = lf[PDF, k]
-        prev_delta[i] = li[DELTA, k] != 0
-        wray = (np.float64(lf[DX, k]), np.float64(lf[DY, k]), np.float64(lf[DZ, k]))
-        v = shade_vertex(i, wray, np.float64(hit[0, k]), prim[k], np.float64(hit[1, k]), np.float64(hit[2, k]), surf,
-                         lt, gs, ps, max_depth, rr_depth, nee, beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key,
-                         pix, aov, aov_open)
-        flags[ALIVE, k] = np.int32(1) if v.alive else np.int32(0)
-        if v.alive:
-            for q in range(3):
-                lf[OX + q, k] = v.next_o[q] - centre[q]
-                lf[DX + q, k] = v.next_d[q]
-                lf[BR + q, k] = beta[i, q]
-            lf[PDF, k] = prev_pdf[i]
-            li[DEPTH, k] = np.int32(depth[i])
-            li[DELTA, k] = np.int32(1) if prev_delta[i] else np.int32(0)
-        flags[SHADOW, k] = np.int32(1) if v.shadow else np.int32(0)
-        if v.shadow:
-            for q in range(3):
-                sh[SOX + q, k] = v.sh_o[q] - centre[q]
-                sh[SDX + q, k] = v.sh_d[q]
-                sh[SR + q, k] = v.sh_L[q]
-            sh[TMAX, k] = v.sh_tmax
 
 
 @kernel(fastmath={"arcp", "contract", "nsz"})

@@ -1,7 +1,7 @@
 """A path's vertex shaded in float64, for every material, light and guide: `shade_vertex`.
 
 The wavefront's `shade` (tracer.integrators.path), the per-thread loop (tracer.integrators.
-thread_loop) and the lanes' general kernel (tracer.engine.lanes.shade_general) all shade a
+thread_loop) and the lanes' general kernel (tracer.engine.general.shade_general) all shade a
 vertex with it: emission with its MIS weight (and the light the camera sees, L_cam), the AOVs,
 the NEE sample, the direction from the guide's mixture and the roulette, the path's state
 updated in place. Its steps are the helpers of tracer.shading; its random numbers go through the
@@ -69,7 +69,7 @@ def shade_vertex(i, wray, tk, p, u1, u2, surf, lt, gs, ps, max_depth, rr_depth, 
     slot i updated). Returns a Vertex: the next ray and shadow ray to trace, and what a record of
     the vertex takes. Arguments as the wavefront's `shade` (tracer.integrators.path); the callers
     are that `shade`, the per-thread loop of tracer.integrators.thread_loop and the lanes' general
-    kernel (engine.lanes.shade_general) (at most 30 arguments: Python passes more
+    kernel (engine.general.shade_general) (at most 30 arguments: Python passes more
     as *args, which Numba can neither inline nor call without copying every array)."""
     alive = False
     no = wray
