@@ -43,12 +43,14 @@ from ..bsdfs import DIFFUSE, ONE_SIDED, P_CLEAR, P_FLAGS, P_KD
 from ..bvh.embree import _INTERSECT16, _LANES, _OCCLUDED16, _VALID, call4
 from ..bvh.numba_bvh import _NumbaThreads
 from ..lights import ENV_NONE
+from ..material import TEX_BITMAP, TEX_CONSTANT, TEX_SLOT_KD
 from ..splitting import make_copy, merge_copies, split_count
 from ..wave import TRACE_PARTS
 from .general import shade_general
-from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, FLAG_ROWS, FLOAT_ROWS, G_N, G_VN, INT_ROWS, KEY, LB, LG,
-                   LR, OX, OY, OZ, PAD, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SHADOW_ROWS, SLOT, SOX, SOY, SOZ, SR,
-                   TL_AREA, TL_EPS, TL_FAST, TL_ONE_SIDED, TL_SEL, TMAX, _rows)
+from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, FLAG_ROWS, FLOAT_ROWS, G_N, G_UV, G_VN, HIT_ROWS, H_T,
+                   INT_ROWS, KEY, LB, LG, LR, OX, OY, OZ, PAD, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SHADOW_ROWS, SLOT,
+                   SOX, SOY, SOZ, SR, TL_AREA, TL_EMIT, TL_EPS, TL_FAST, TL_KD, TL_ONE_SIDED, TL_ROWS, TL_SEL, TL_TEX,
+                   TMAX, _rows)
 from .vertex import MAX_BOUNCES
 
 _CHUNKS = 64  # compaction: chunks counted, then written at their offsets
@@ -61,6 +63,9 @@ HALF_PI = F(0.5 * math.pi)
 INV24 = F(2.0 ** -24)
 SHORT = F(1.0 - 1e-3)  # a shadow ray ends this fraction of the way to its light point
 TINY = F(1e-20)
+HALF = F(0.5)
+TWO23 = F(2.0 ** 23)
+BIG = F(1e30)  # a texel coordinate past this is not finite (material.texture_eval: black)
 RR_MAX = 0.95  # the roulette's survival cap (GuideState.rr_max's default), the fast class's
 # Taylor coefficients of sin and cos on [0, pi/2] (errors below 4e-6 and 5e-7 there)
 S3, S5, S7, S9, S11 = (F(-1.0 / 6.0), F(1.0 / 120.0), F(-1.0 / 5040.0), F(1.0 / 362880.0), F(-1.0 / 39916800.0))
@@ -87,6 +92,13 @@ def rand32(key, dim):
 
 
 @jit(inline="always")
+def floor32(x):
+    """floor of a float32, in float32 (2^23 and past are integers already), kept to ops LLVM packs."""
+    t = F(np.int32(x)) if abs(x) < TWO23 else x
+    return t - ONE if t > x else t
+
+
+@jit(inline="always")
 def sincos2pi(u):
     """(cos, sin) of 2 pi u for u in [0, 1): the quadrant from 4u, then Taylor polynomials on [0, pi/2)."""
     v = u * F(4.0)
@@ -110,10 +122,11 @@ class LaneBuffers:
         self.i = _rows(len(INT_ROWS), size, np.int32)
         self.hole = np.zeros(size, np.int32)
         self.mover = np.zeros(size, np.int32)
-        self.hit = _rows(3, size, F)  # t, b1, b2
+        self.hit = _rows(len(HIT_ROWS), size, F)
         self.prim = np.zeros(size, np.int32)
         self.flags = _rows(len(FLAG_ROWS), size, np.int32)
         self.shadow = _rows(len(SHADOW_ROWS), size, F)
+        self.kd = _rows(3, size, F)  # the fast class's reflectance at the vertex
         self.fast = np.zeros(size, np.int32)  # the lane's vertex is of the fast class
         self.general = np.zeros(size, np.int32)  # the lanes the general kernel shades
         self.ks = np.ones(size, np.int64)  # split_lanes: copies of each lane (0: the window ended it)
@@ -127,32 +140,49 @@ def _as_rows(a, dtype):
 
 
 class LaneScene:
-    """The scene as the lanes read it, float32 rows per triangle (padded: _rows): geo (21, F) v0 - centre,
-    e1, e2, the unit geometric normal, the three corner normals (zero: none; rows G_*); alb (3, F)
-    diffuse reflectance; emit (3, F) radiance; tl (5, F)
+    """The scene as the lanes read it, float32 rows per triangle (padded: _rows; engine.rows): geo
+    (21 rows, 27 with UVs) v0 - centre, e1, e2, the unit geometric normal, the three corner normals
+    (zero: none), the corner UVs where a fast triangle is textured (rows G_*); tl (TL_ROWS)
     NEE's probability of choosing the triangle, its area, its ray offset, 1 if one-sided, 1 if its
-    vertices are of the fast class (fast_triangles); the alias table over the emissive triangles
-    (alias_p: the probability of keeping column j; alias_i (2, columns): column j's triangle and its
-    alias's); escape_fast: an escaped path ends with nothing to add (no environment)."""
+    vertices are of the fast class (fast_triangles), its reflectance's texture (-1: none), its
+    reflectance and emitted radiance (rows TL_*); the textures the fast class reads: tinfo (T, 16)
+    float32 the rows of tracer.material's texture table, tint (T, 3) int32 their texel offset,
+    width and height, tdata the texels (one constant row when the scene has none); the alias table
+    over the emissive triangles (alias_p: the probability of keeping column j; alias_i (2,
+    columns): column j's triangle and its alias's); escape_fast: an escaped path ends with nothing
+    to add (no environment)."""
 
     def __init__(self, scene, surf, lt, centre):
         v = surf.tri - centre
-        vn = surf.vn if surf.vn.shape[0] else np.zeros_like(v)
-        self.geo = _as_rows(np.concatenate([v[:, 0].T, (v[:, 1] - v[:, 0]).T, (v[:, 2] - v[:, 0]).T, surf.normal.T,
-                                            vn[:, 0].T, vn[:, 1].T, vn[:, 2].T]), F)
-        param = surf.mat_param[surf.material]
-        self.alb = _as_rows(param[:, P_KD:P_KD + 3].T, F)
         nf = v.shape[0]
-        self.emit = _rows(3, nf, F)
-        self.tl = _rows(5, nf, F)
+        vn = surf.vn if surf.vn.shape[0] else np.zeros_like(v)
+        fast, tex = fast_triangles(scene, lt)
+        rows = [v[:, 0].T, (v[:, 1] - v[:, 0]).T, (v[:, 2] - v[:, 0]).T, surf.normal.T, vn[:, 0].T, vn[:, 1].T,
+                vn[:, 2].T]
+        if np.any(tex >= 0):
+            uv = surf.uv if surf.uv.shape[0] else np.zeros((nf, 3, 2))
+            rows.append(uv.reshape(nf, 6).T)
+        self.geo = _as_rows(np.concatenate(rows), F)
+        param = surf.mat_param[surf.material]
+        self.tl = _rows(TL_ROWS, nf, F)
         self.tl[TL_EPS, :nf] = surf.eps
         self.tl[TL_ONE_SIDED, :nf] = (param[:, P_FLAGS].astype(np.int64) & ONE_SIDED) != 0
-        self.tl[TL_FAST, :nf] = fast_triangles(scene, lt)
+        self.tl[TL_FAST, :nf] = fast
+        self.tl[TL_TEX, :nf] = tex
+        self.tl[TL_KD:TL_KD + 3, :nf] = param[:, P_KD:P_KD + 3].T
+        if surf.tex_info.shape[0]:
+            self.tinfo = surf.tex_info.astype(F)
+            self.tint = surf.tex_info[:, 1:4].astype(np.int32)
+            self.tdata = surf.tex_data
+        else:
+            self.tinfo = np.zeros((1, surf.tex_info.shape[1]), F)
+            self.tint = np.zeros((1, 3), np.int32)
+            self.tdata = np.zeros(3, F)
         self.escape_fast = lt.env_type == ENV_NONE
-        self.all_fast = bool(np.all(self.tl[TL_FAST, :nf] > 0.0)) and self.escape_fast  # every vertex fast
+        self.all_fast = bool(np.all(fast)) and self.escape_fast  # every vertex fast
         e = lt.tri
         sel = (1.0 - lt.p_env) * np.diff(lt.cdf)
-        self.emit[:, e] = lt.radiance.T
+        self.tl[TL_EMIT:TL_EMIT + 3, e] = lt.radiance.T
         self.tl[TL_SEL, e] = sel
         self.tl[TL_AREA, e] = lt.area
         self.n_lights = int(e.shape[0])
@@ -201,18 +231,24 @@ def alias_table(p):
 
 
 def fast_triangles(scene, lights):
-    """(F,) bool: the triangles whose vertices the fast class shades: a DIFFUSE material without
-    textures or opacity (vertex normals allowed), in a scene lit by triangles only (the fast class's
-    NEE samples nothing else)."""
+    """((F,) bool, (F,) int): the triangles whose vertices the fast class shades, and the texture
+    of each one's reflectance (-1: none). Fast: a DIFFUSE material without opacity, bump or
+    specular textures (its reflectance may be a texture; vertex normals allowed), in a scene lit by
+    triangles only (the fast class's NEE samples nothing else) whose texels the lanes' 32-bit
+    indices reach."""
     m = scene.materials
     nf = scene.tri.shape[0]
-    if lights.env_type != ENV_NONE or lights.delta_kind.shape[0]:
-        return np.zeros(nf, np.bool_)
+    none = np.full(nf, -1, np.int32)
+    if lights.env_type != ENV_NONE or lights.delta_kind.shape[0] or scene.textures.data.shape[0] >= 2 ** 31:
+        return np.zeros(nf, np.bool_), none
     mat = scene.tri_material
     ok = (m.type == DIFFUSE) & (m.param[:, P_CLEAR] == 0.0)
-    if m.tex is not None:
-        ok &= np.all(m.tex < 0, axis=1)
-    return ok[mat]
+    kd = np.full(ok.shape[0], -1, np.int32)
+    if m.tex is not None and m.tex.shape[0]:
+        others = np.delete(m.tex, TEX_SLOT_KD, axis=1)
+        ok &= np.all(others < 0, axis=1)
+        kd = np.where(ok, m.tex[:, TEX_SLOT_KD], -1).astype(np.int32)
+    return ok[mat], kd[mat]
 
 
 def usable(ctx, record, ps):
@@ -411,16 +447,15 @@ def intersect(fn, scene, scratch, lf, n, hit, prim):
 
 
 @kernel
-def classify(lf, li, n, hit, prim, tl, geo, alb, emit, use_fast, escape_fast, state, ks, flags, fast_lane, general):
+def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, flags, fast_lane, general):
     """Mark the lanes 0 .. n-1 whose vertex is of the fast class (fast_lane: with use_fast, a hit on
     a triangle with tl[TL_FAST], or an escape where escape_fast) and list the others, in order, in `general`;
     returns how many were listed. A lane with ks 0 (split_lanes: the weight window ended its path)
     is neither: flags say it ends and has no shadow ray. For the fast ones it writes what shade_vertex writes into the
     wave's PathState `state` besides the path: at the camera ray's hit the AOVs' shading normal
-    (on the camera's side of the surface) and distance and L_cam, the light the camera sees; the albedo at the first vertex
-    that is not a delta BSDF (aov_open)."""
+    (on the camera's side of the surface) and distance and L_cam, the light the camera sees (the
+    albedo is albedo_aov's, after shade)."""
     aov = state.aov
-    aov_open = state.aov_open
     L_cam = state.L_cam
     counts = np.zeros(_CHUNKS + 1, np.int64)
     for c in prange(_CHUNKS):
@@ -462,12 +497,8 @@ def classify(lf, li, n, hit, prim, tl, geo, alb, emit, use_fast, escape_fast, st
                         ns[q] = geo[G_N + q, p]
                 for q in range(3):
                     aov[i, 3 + q] = sgn * ns[q]
-                    L_cam[i, q] = lf[BR + q, k] * emit[q, p] * lit
-                aov[i, 6] = hit[0, k]
-            if aov_open[i]:
-                for q in range(3):
-                    aov[i, q] = alb[q, p]
-                aov_open[i] = False
+                    L_cam[i, q] = lf[BR + q, k] * tl[TL_EMIT + q, p] * lit
+                aov[i, 6] = hit[H_T, k]
         counts[c + 1] = g
     for c in range(_CHUNKS):
         counts[c + 1] += counts[c]
@@ -480,8 +511,93 @@ def classify(lf, li, n, hit, prim, tl, geo, alb, emit, use_fast, escape_fast, st
     return counts[_CHUNKS]
 
 
+@kernel
+def albedo_aov(li, n, kd, prim, fast_lane, state):
+    """The AOV albedo of each path whose fast-class vertex in lanes 0 .. n-1 is its first that is not
+    a delta BSDF (aov_open): its reflectance (kd, reflectance's)."""
+    aov = state.aov
+    aov_open = state.aov_open
+    for k in prange(n):
+        i = li[SLOT, k]
+        if fast_lane[k] != 0 and prim[k] >= 0 and aov_open[i]:
+            for q in range(3):
+                aov[i, q] = kd[q, k]
+            aov_open[i] = False
+
+
 @kernel(fastmath={"arcp", "contract", "nsz"})
-def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, alb, emit, tl, alias_p, alias_i, lim):
+def reflectance(n, hit, prim, fast_lane, geo, tl, tinfo, tint, tdata, kd):
+    """The diffuse reflectance at the vertex of each fast lane 0 .. n-1 into kd (3 rows): its
+    triangle's texture (tl[TL_TEX]) at the hit's UV, as material.texture_eval (constant,
+    checkerboard, or bilinear and repeating; black where the texel's coordinate is not finite), or
+    its material's reflectance; tinfo, tint, tdata: LaneScene's textures."""
+    for k in prange(n):
+        p = prim[k]
+        pc = p if (p >= 0) & (fast_lane[k] != 0) else 0
+        b1, b2 = hit[1, k], hit[2, k]
+        b0 = ONE - b1 - b2
+        tx = tl[TL_TEX, pc]
+        textured = tx >= ZERO
+        kt = np.int32(tx) if textured else np.int32(0)
+        pt = pc if textured else 0
+        ru = np.int32(G_UV) if textured else np.int32(0)  # geo has UV rows only if some fast triangle is textured
+        u = b0 * geo[ru, pt] + b1 * geo[ru + 2, pt] + b2 * geo[ru + 4, pt]
+        v = b0 * geo[ru + 1, pt] + b1 * geo[ru + 3, pt] + b2 * geo[ru + 5, pt]
+        uu = tinfo[kt, 4] * u + tinfo[kt, 5] * v + tinfo[kt, 6]
+        vv = tinfo[kt, 7] * u + tinfo[kt, 8] * v + tinfo[kt, 9]
+        kind = tinfo[kt, 0]
+        first = ((uu - floor32(uu)) > HALF) == ((vv - floor32(vv)) > HALF)  # the checkerboard's colour 0
+        tw = tint[kt, 1]
+        th = tint[kt, 2]
+        wf, hf = F(tw), F(th)
+        x = uu * wf - HALF
+        y = (ONE - vv) * hf - HALF
+        finite = (x > -BIG) & (x < BIG) & (y > -BIG) & (y < BIG)
+        x = x if finite else ZERO
+        y = y if finite else ZERO
+        x0 = floor32(x)
+        y0 = floor32(y)
+        fx = x - x0
+        fy = y - y0
+        xm = x0 - wf * floor32(x0 / wf)  # x0 mod w, integer-valued, put in [0, w) below
+        xm = xm + wf if xm < ZERO else (xm - wf if xm >= wf else xm)
+        ym = y0 - hf * floor32(y0 / hf)
+        ym = ym + hf if ym < ZERO else (ym - hf if ym >= hf else ym)
+        ix = np.int32(xm)
+        iy = np.int32(ym)
+        ix1 = ix + np.int32(1) if ix + np.int32(1) < tw else np.int32(0)
+        iy1 = iy + np.int32(1) if iy + np.int32(1) < th else np.int32(0)
+        bitmap = textured & (kind == F(TEX_BITMAP))
+        row0 = tint[kt, 0] + np.int32(3) * iy * tw if bitmap else np.int32(0)
+        row1 = tint[kt, 0] + np.int32(3) * iy1 * tw if bitmap else np.int32(0)
+        j00, j01 = row0 + np.int32(3) * ix, row0 + np.int32(3) * ix1
+        j10, j11 = row1 + np.int32(3) * ix, row1 + np.int32(3) * ix1
+        j00 = j00 if bitmap else np.int32(0)
+        j01 = j01 if bitmap else np.int32(0)
+        j10 = j10 if bitmap else np.int32(0)
+        j11 = j11 if bitmap else np.int32(0)
+        w00, w01 = (ONE - fy) * (ONE - fx), (ONE - fy) * fx
+        w10, w11 = fy * (ONE - fx), fy * fx
+        ar = tl[TL_KD, pc]
+        ag = tl[TL_KD + 1, pc]
+        ab = tl[TL_KD + 2, pc]
+        c0 = np.int32(10) if first | (kind == F(TEX_CONSTANT)) else np.int32(13)  # colour 0 or 1
+        ar = ar if not textured else tinfo[kt, c0]
+        ag = ag if not textured else tinfo[kt, c0 + 1]
+        ab = ab if not textured else tinfo[kt, c0 + 2]
+        tr = w00 * tdata[j00] + w01 * tdata[j01] + w10 * tdata[j10] + w11 * tdata[j11]
+        tg = w00 * tdata[j00 + 1] + w01 * tdata[j01 + 1] + w10 * tdata[j10 + 1] + w11 * tdata[j11 + 1]
+        tb = w00 * tdata[j00 + 2] + w01 * tdata[j01 + 2] + w10 * tdata[j10 + 2] + w11 * tdata[j11 + 2]
+        ar = (tr if finite else ZERO) if bitmap else ar
+        ag = (tg if finite else ZERO) if bitmap else ag
+        ab = (tb if finite else ZERO) if bitmap else ab
+        kd[0, k] = ar
+        kd[1, k] = ag
+        kd[2, k] = ab
+
+
+@kernel(fastmath={"arcp", "contract", "nsz"})
+def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_p, alias_i, lim):
     """Shade the vertex each lane 0 .. n-1 of the fast class (fast_lane) hit (prim -1: escaped, the
     path ends): emission with its MIS weight (full without NEE or after a delta bounce) into the
     lane's radiance; with NEE (lim[L_NEE]) a light sample with MIS into the shadow rows
@@ -529,9 +645,9 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, alb, emit, tl, alias_
         ssg = ONE if wo_z >= ZERO else -ONE
         sx, sy, sz = snx * ssg, sny * ssg, snz * ssg  # the shading normal on wo's side
         black = (tl[TL_ONE_SIDED, pc] > ZERO) & (wo_z <= ZERO)  # a one-sided surface seen from behind
-        ar = ZERO if black else alb[0, pc]
-        ag = ZERO if black else alb[1, pc]
-        ab = ZERO if black else alb[2, pc]
+        ar = ZERO if black else kd[0, k]
+        ag = ZERO if black else kd[1, k]
+        ab = ZERO if black else kd[2, k]
         br, bg, bb = lf[BR, k], lf[BG, k], lf[BB, k]
         prev_pdf = lf[PDF, k]
         depth = li[DEPTH, k]
@@ -546,9 +662,9 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, alb, emit, tl, alias_
         pp = prev_pdf * prev_pdf
         w_mis = pp / max(pp + pl * pl, TINY)
         w_e = ZERO if not lit else (w_mis if nee & (depth > 0) & (delta == 0) else ONE)
-        lf[LR, k] += br * emit[0, pc] * w_e
-        lf[LG, k] += bg * emit[1, pc] * w_e
-        lf[LB, k] += bb * emit[2, pc] * w_e
+        lf[LR, k] += br * tl[TL_EMIT, pc] * w_e
+        lf[LG, k] += bg * tl[TL_EMIT + 1, pc] * w_e
+        lf[LB, k] += bb * tl[TL_EMIT + 2, pc] * w_e
 
         # a light sample: an emissive triangle from the alias table, a point uniform on it
         us = rand32(key, base + D_LIGHT) * F(nl)
@@ -572,9 +688,9 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, alb, emit, tl, alias_
         g = (pb * pls / max(pls * pls + pb * pb, TINY)) if ok else ZERO  # f cos / p_light x the power heuristic
         eps = tl[TL_EPS, pc]
         ox, oy, oz = x0 + fx * eps, x1 + fy * eps, x2 + fz * eps
-        sr = br * ar * emit[0, lj] * g
-        sg = bg * ag * emit[1, lj] * g
-        sb = bb * ab * emit[2, lj] * g
+        sr = br * ar * tl[TL_EMIT, lj] * g
+        sg = bg * ag * tl[TL_EMIT + 1, lj] * g
+        sb = bb * ab * tl[TL_EMIT + 2, lj] * g
         sh[SOX, k], sh[SOY, k], sh[SOZ, k] = ox, oy, oz
         sh[SDX, k], sh[SDY, k], sh[SDZ, k] = wx, wy, wz
         sh[TMAX, k] = d2 * inv_d * SHORT
@@ -755,13 +871,17 @@ def run(ctx, buf, n, ps, stats, split=None):
                 part["rest"] += t - t2
                 t2 = t
             ng = 0
-            if first or not (ls.all_fast and use_fast):  # else only the camera rays' hits (AOVs) need it
-                ng = int(classify(lf, li, m, lanes.hit, lanes.prim, ls.tl, ls.geo, ls.alb, ls.emit, use_fast,
+            classified = first or not (ls.all_fast and use_fast)
+            if classified:  # else only the camera rays' hits (AOVs) need it
+                ng = int(classify(lf, li, m, lanes.hit, lanes.prim, ls.tl, ls.geo, use_fast,
                                   ls.escape_fast, state, lanes.ks, flags, lanes.fast, lanes.general))
                 first = False
             if use_fast and ng < m:
-                shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.alb, ls.emit,
-                      ls.tl, ls.alias_p, ls.alias_i, lim)
+                reflectance(m, lanes.hit, lanes.prim, lanes.fast, ls.geo, ls.tl, ls.tinfo, ls.tint, ls.tdata, lanes.kd)
+                shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.tl, lanes.kd,
+                      ls.alias_p, ls.alias_i, lim)
+                if classified:
+                    albedo_aov(li, m, lanes.kd, lanes.prim, lanes.fast, state)
             if ng:
                 shade_general(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.general[:ng], centre,
                               ctx.surfaces, ctx.lights, ctx.guide_state, ps, limits, state)
