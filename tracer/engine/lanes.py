@@ -39,77 +39,27 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit, kernel
-from ..bsdfs import DIFFUSE, ONE_SIDED, P_CLEAR, P_FLAGS, P_KD
+from ..bsdfs import COATED, DIFFUSE, ONE_SIDED, P_CLEAR, P_FLAGS, P_KD
 from ..bvh.embree import _INTERSECT16, _LANES, _OCCLUDED16, _VALID, call4
 from ..bvh.numba_bvh import _NumbaThreads
 from ..lights import ENV_NONE
 from ..material import TEX_BITMAP, TEX_CONSTANT, TEX_SLOT_KD
 from ..splitting import make_copy, merge_copies, split_count
 from ..wave import TRACE_PARTS
+from .coated import shade_coated
 from .general import shade_general
 from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, FLAG_ROWS, FLOAT_ROWS, G_N, G_UV, G_VN, HIT_ROWS, H_T,
-                   INT_ROWS, KEY, LB, LG, LR, OX, OY, OZ, PAD, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SHADOW_ROWS, SLOT,
-                   SOX, SOY, SOZ, SR, TL_AREA, TL_EMIT, TL_EPS, TL_FAST, TL_KD, TL_ONE_SIDED, TL_ROWS, TL_SEL, TL_TEX,
-                   TMAX, _rows)
+                   INT_ROWS, KEY, LB, LG, LR, L_LIGHTS, L_MAX, L_NEE, L_RR, OX, OY, OZ, PAD, PDF, SB, SDX, SDY, SDZ, SG,
+                   SHADOW, SHADOW_ROWS, SLOT, SOX, SOY, SOZ, SR, TL_AREA, TL_EMIT, TL_EPS, TL_FAST, TL_KD, TL_ONE_SIDED,
+                   TL_ROWS, TL_SEL, TL_TEX, TMAX, _rows)
+from .sampling32 import (BIG, BLOCK, BOUNCE, D_DIR, D_LIGHT, D_POS, D_RR, F, HALF, INV_PI, ONE, RR_MAX, SHORT, TINY,
+                         ZERO, floor32, rand32, sincos2pi)
 from .vertex import MAX_BOUNCES
 
 _CHUNKS = 64  # compaction: chunks counted, then written at their offsets
-
-F = np.float32
-U32 = np.uint32
-ZERO, ONE = F(0.0), F(1.0)
-INV_PI = F(1.0 / math.pi)
-HALF_PI = F(0.5 * math.pi)
-INV24 = F(2.0 ** -24)
-SHORT = F(1.0 - 1e-3)  # a shadow ray ends this fraction of the way to its light point
-TINY = F(1e-20)
-HALF = F(0.5)
-TWO23 = F(2.0 ** 23)
-BIG = F(1e30)  # a texel coordinate past this is not finite (material.texture_eval: black)
-RR_MAX = 0.95  # the roulette's survival cap (GuideState.rr_max's default), the fast class's
-# Taylor coefficients of sin and cos on [0, pi/2] (errors below 4e-6 and 5e-7 there)
-S3, S5, S7, S9, S11 = (F(-1.0 / 6.0), F(1.0 / 120.0), F(-1.0 / 5040.0), F(1.0 / 362880.0), F(-1.0 / 39916800.0))
-C2, C4, C6, C8, C10 = (F(-0.5), F(1.0 / 24.0), F(-1.0 / 720.0), F(1.0 / 40320.0), F(-1.0 / 3628800.0))
-_GOLDEN32, _FM1, _FM2 = U32(0x9E3779B9), U32(0x85EBCA6B), U32(0xC2B2AE35)
-_S16, _S13, _S8 = U32(16), U32(13), U32(8)
-# tracer.rng's dimensions of bounce k: BOUNCE + BLOCK k + slot (direction 0, 1; light 4; its point 5, 6; roulette 7)
-BOUNCE, BLOCK = 2, 8
-D_DIR, D_LIGHT, D_POS, D_RR = 0, 4, 5, 7
-# lim's entries
-L_RR, L_MAX, L_NEE, L_LIGHTS = range(4)
-
-
-
-@jit(inline="always")
-def rand32(key, dim):
-    """float32 in [0, 1): the top 24 bits of MurmurHash3's finaliser of key + (dim + 1) x golden
-    (SplitMix's sequence in 32 bits), every integer kept 32-bit so that LLVM packs 8 or 16 lanes."""
-    x = U32(U32(key) + U32(U32(dim + 1) * _GOLDEN32))
-    x = U32(U32(x ^ (x >> _S16)) * _FM1)
-    x = U32(U32(x ^ (x >> _S13)) * _FM2)
-    x = U32(x ^ (x >> _S16))
-    return F(np.int32(x >> _S8)) * INV24
-
-
-@jit(inline="always")
-def floor32(x):
-    """floor of a float32, in float32 (2^23 and past are integers already), kept to ops LLVM packs."""
-    t = F(np.int32(x)) if abs(x) < TWO23 else x
-    return t - ONE if t > x else t
-
-
-@jit(inline="always")
-def sincos2pi(u):
-    """(cos, sin) of 2 pi u for u in [0, 1): the quadrant from 4u, then Taylor polynomials on [0, pi/2)."""
-    v = u * F(4.0)
-    q = min(np.int32(v), np.int32(3))
-    a = (v - F(q)) * HALF_PI
-    a2 = a * a
-    s = a * (ONE + a2 * (S3 + a2 * (S5 + a2 * (S7 + a2 * (S9 + a2 * S11)))))
-    c = ONE + a2 * (C2 + a2 * (C4 + a2 * (C6 + a2 * (C8 + a2 * C10))))
-    cq = c if q == 0 else (-s if q == 1 else (-c if q == 2 else s))
-    sq = s if q == 0 else (c if q == 1 else (-s if q == 2 else -c))
-    return cq, sq
+# a vertex's class (LaneBuffers.fast, tl[TL_FAST]): the general kernel's, the fast kernel's (diffuse), the coated
+# kernel's (engine.coated)
+GENERAL, DIFFUSE_CLASS, COATED_CLASS = 0, 1, 2
 
 
 class LaneBuffers:
@@ -128,7 +78,7 @@ class LaneBuffers:
         self.shadow = _rows(len(SHADOW_ROWS), size, F)
         self.kd = _rows(3, size, F)  # the fast class's reflectance at the vertex
         self.fast = np.zeros(size, np.int32)  # the lane's vertex is of the fast class
-        self.general = np.zeros(size, np.int32)  # the lanes the general kernel shades
+        self.lists = np.zeros((2, size), np.int32)  # the lanes the general kernel shades, the coated kernel's
         self.ks = np.ones(size, np.int64)  # split_lanes: copies of each lane (0: the window ended it)
 
 
@@ -179,7 +129,8 @@ class LaneScene:
             self.tint = np.zeros((1, 3), np.int32)
             self.tdata = np.zeros(3, F)
         self.escape_fast = lt.env_type == ENV_NONE
-        self.all_fast = bool(np.all(fast)) and self.escape_fast  # every vertex fast
+        self.all_fast = bool(np.all(fast == DIFFUSE_CLASS)) and self.escape_fast  # every vertex the fast kernel's
+        self.smooth = surf.vn.shape[0] > 0
         e = lt.tri
         sel = (1.0 - lt.p_env) * np.diff(lt.cdf)
         self.tl[TL_EMIT:TL_EMIT + 3, e] = lt.radiance.T
@@ -231,24 +182,28 @@ def alias_table(p):
 
 
 def fast_triangles(scene, lights):
-    """((F,) bool, (F,) int): the triangles whose vertices the fast class shades, and the texture
-    of each one's reflectance (-1: none). Fast: a DIFFUSE material without opacity, bump or
-    specular textures (its reflectance may be a texture; vertex normals allowed), in a scene lit by
-    triangles only (the fast class's NEE samples nothing else) whose texels the lanes' 32-bit
-    indices reach."""
+    """((F,) int32, (F,) int32): each triangle's class (GENERAL, DIFFUSE_CLASS, COATED_CLASS) and
+    the texture of its reflectance (-1: none). In a scene lit by triangles only (the classes' NEE
+    samples nothing else) whose texels the lanes' 32-bit indices reach: DIFFUSE materials, and
+    COATED ones on triangles that do not emit, without opacity, bump or specular textures (the
+    reflectance may be a texture; vertex normals allowed). Every other triangle is GENERAL."""
     m = scene.materials
     nf = scene.tri.shape[0]
     none = np.full(nf, -1, np.int32)
     if lights.env_type != ENV_NONE or lights.delta_kind.shape[0] or scene.textures.data.shape[0] >= 2 ** 31:
-        return np.zeros(nf, np.bool_), none
+        return np.zeros(nf, np.int32), none
     mat = scene.tri_material
-    ok = (m.type == DIFFUSE) & (m.param[:, P_CLEAR] == 0.0)
-    kd = np.full(ok.shape[0], -1, np.int32)
+    opaque = m.param[:, P_CLEAR] == 0.0
+    cls = np.where((m.type == DIFFUSE) & opaque, DIFFUSE_CLASS, np.where((m.type == COATED) & opaque, COATED_CLASS,
+                                                                           GENERAL)).astype(np.int32)
+    kd = np.full(cls.shape[0], -1, np.int32)
     if m.tex is not None and m.tex.shape[0]:
         others = np.delete(m.tex, TEX_SLOT_KD, axis=1)
-        ok &= np.all(others < 0, axis=1)
-        kd = np.where(ok, m.tex[:, TEX_SLOT_KD], -1).astype(np.int32)
-    return ok[mat], kd[mat]
+        cls[np.any(others >= 0, axis=1)] = GENERAL
+        kd = np.where(cls != GENERAL, m.tex[:, TEX_SLOT_KD], -1).astype(np.int32)
+    tri_cls = cls[mat]
+    tri_cls[(tri_cls == COATED_CLASS) & np.any(m.emission[mat] > 0.0, axis=1)] = GENERAL
+    return tri_cls, kd[mat]
 
 
 def usable(ctx, record, ps):
@@ -447,30 +402,39 @@ def intersect(fn, scene, scratch, lf, n, hit, prim):
 
 
 @kernel
-def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, flags, fast_lane, general):
-    """Mark the lanes 0 .. n-1 whose vertex is of the fast class (fast_lane: with use_fast, a hit on
-    a triangle with tl[TL_FAST], or an escape where escape_fast) and list the others, in order, in `general`;
-    returns how many were listed. A lane with ks 0 (split_lanes: the weight window ended its path)
-    is neither: flags say it ends and has no shadow ray. For the fast ones it writes what shade_vertex writes into the
+def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, flags, fast_lane, lists):
+    """Mark each lane 0 .. n-1 with its vertex's class (fast_lane: with use_fast, a hit's triangle's
+    tl[TL_FAST], an escape DIFFUSE_CLASS where escape_fast; else GENERAL), and list the GENERAL lanes
+    in order in lists[0], the COATED_CLASS ones in lists[1]; returns how many of each. A lane with ks 0
+    (split_lanes: the weight window ended its path) is in none: flags say it ends and has no shadow
+    ray. For the lanes of the two classes it writes what shade_vertex writes into the
     wave's PathState `state` besides the path: at the camera ray's hit the AOVs' shading normal
     (on the camera's side of the surface) and distance and L_cam, the light the camera sees (the
     albedo is albedo_aov's, after shade)."""
     aov = state.aov
     L_cam = state.L_cam
-    counts = np.zeros(_CHUNKS + 1, np.int64)
+    counts = np.zeros((_CHUNKS + 1, 2), np.int64)
     for c in prange(_CHUNKS):
         g = 0
+        h = 0
         for k in range(c * n // _CHUNKS, (c + 1) * n // _CHUNKS):
             p = prim[k]
-            fast = use_fast and (tl[TL_FAST, p] > 0.0 if p >= 0 else escape_fast)
-            fast_lane[k] = np.int32(1) if fast else np.int32(0)
+            cls = GENERAL
+            if use_fast:
+                if p >= 0:
+                    cls = np.int32(tl[TL_FAST, p])
+                elif escape_fast:
+                    cls = DIFFUSE_CLASS
+            fast_lane[k] = cls
             if ks[k] == 0:
                 flags[ALIVE, k] = 0
                 flags[SHADOW, k] = 0
                 continue
-            if not fast:
+            if cls == GENERAL:
                 g += 1
                 continue
+            if cls == COATED_CLASS:
+                h += 1
             i = li[SLOT, k]
             first = li[DEPTH, k] == 0
             if p < 0:
@@ -499,16 +463,24 @@ def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, fl
                     aov[i, 3 + q] = sgn * ns[q]
                     L_cam[i, q] = lf[BR + q, k] * tl[TL_EMIT + q, p] * lit
                 aov[i, 6] = hit[H_T, k]
-        counts[c + 1] = g
+        counts[c + 1, 0] = g
+        counts[c + 1, 1] = h
     for c in range(_CHUNKS):
-        counts[c + 1] += counts[c]
+        counts[c + 1, 0] += counts[c, 0]
+        counts[c + 1, 1] += counts[c, 1]
     for c in prange(_CHUNKS):
-        j = counts[c]
+        j = counts[c, 0]
+        jc = counts[c, 1]
         for k in range(c * n // _CHUNKS, (c + 1) * n // _CHUNKS):
-            if fast_lane[k] == 0 and ks[k] != 0:
-                general[j] = k
+            if ks[k] == 0:
+                continue
+            if fast_lane[k] == GENERAL:
+                lists[0, j] = k
                 j += 1
-    return counts[_CHUNKS]
+            elif fast_lane[k] == COATED_CLASS:
+                lists[1, jc] = k
+                jc += 1
+    return counts[_CHUNKS, 0], counts[_CHUNKS, 1]
 
 
 @kernel
@@ -616,7 +588,7 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_p, alia
     n_lights = lim[L_LIGHTS]
     nl = alias_p.shape[0]
     for k in prange(n):
-        fast = fast_lane[k] != 0
+        fast = fast_lane[k] == DIFFUSE_CLASS
         p = prim[k]
         hit_ok = p >= 0
         pc = p if hit_ok else 0
@@ -839,13 +811,14 @@ def run(ctx, buf, n, ps, stats, split=None):
         lanes = buf._lanes = LaneBuffers(buf.capacity)
     accel = ctx.accel
     scene, _, centre, _, scratch = accel.packet_args()
-    lim = np.array([ctx.rr_depth, ctx.max_depth, int(ctx.nee), ls.n_lights], np.int32)
+    lim = np.array([ctx.rr_depth, ctx.max_depth, int(ctx.nee), ls.n_lights, int(ls.smooth)], np.int32)
     limits = (ctx.max_depth, ctx.rr_depth, ctx.nee)
     state = buf.path_state(n)
     splitting = split is not None and buf.capacity > buf.size
     use_fast = fast_allowed(ctx.guide_state) and not splitting  # split_lanes reads the PathState
     n_slots = n
-    rays = shadows = general = ended = 0
+    rays = shadows = general = coated = ended = 0
+    surf = ctx.surfaces
     part = dict.fromkeys(TRACE_PARTS, 0.0)  # seconds of each step
     clock = time.perf_counter
     lf, li, flags = lanes.f, lanes.i, lanes.flags
@@ -870,21 +843,26 @@ def run(ctx, buf, n, ps, stats, split=None):
                 t = clock()
                 part["rest"] += t - t2
                 t2 = t
-            ng = 0
+            ng = nc = 0
             classified = first or not (ls.all_fast and use_fast)
             if classified:  # else only the camera rays' hits (AOVs) need it
-                ng = int(classify(lf, li, m, lanes.hit, lanes.prim, ls.tl, ls.geo, use_fast,
-                                  ls.escape_fast, state, lanes.ks, flags, lanes.fast, lanes.general))
+                ng, nc = classify(lf, li, m, lanes.hit, lanes.prim, ls.tl, ls.geo, use_fast, ls.escape_fast, state,
+                                  lanes.ks, flags, lanes.fast, lanes.lists)
+                ng, nc = int(ng), int(nc)
                 first = False
             if use_fast and ng < m:
                 reflectance(m, lanes.hit, lanes.prim, lanes.fast, ls.geo, ls.tl, ls.tinfo, ls.tint, ls.tdata, lanes.kd)
                 shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.tl, lanes.kd,
                       ls.alias_p, ls.alias_i, lim)
+                if nc:
+                    shade_coated(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :nc], ls.geo, ls.tl,
+                                 lanes.kd, ls.alias_p, ls.alias_i, lim, surf.mat_param, surf.material, surf.mat_table)
+                    coated += nc
                 if classified:
                     albedo_aov(li, m, lanes.kd, lanes.prim, lanes.fast, state)
             if ng:
-                shade_general(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.general[:ng], centre,
-                              ctx.surfaces, ctx.lights, ctx.guide_state, ps, limits, state)
+                shade_general(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[0, :ng], centre,
+                              surf, ctx.lights, ctx.guide_state, ps, limits, state)
                 general += ng
             t3 = clock()
             part["shade"] += t3 - t2
@@ -901,6 +879,7 @@ def run(ctx, buf, n, ps, stats, split=None):
     stats.shadow_rays += shadows
     stats.lane_samples += n
     stats.lane_general += general
+    stats.lane_coated += coated
     for name, sec in part.items():
         stats.trace_parts[name] += sec
     stats.tick("trace", t0)

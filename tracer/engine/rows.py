@@ -32,6 +32,10 @@ G_V0, G_E1, G_E2, G_N, G_VN, G_UV = 0, 3, 6, 9, 12, 21
 TL_SEL, TL_AREA, TL_EPS, TL_ONE_SIDED, TL_FAST, TL_TEX, TL_KD, TL_EMIT = 0, 1, 2, 3, 4, 5, 6, 9
 TL_ROWS = 12
 
+# lim, the int32 settings the lanes' kernels take: rr_depth, max_depth (< 0: none), nee, the
+# emissive triangles' count, whether the scene has corner normals
+L_RR, L_MAX, L_NEE, L_LIGHTS, L_SMOOTH = range(5)
+
 # Rows are this many lanes longer than they need be: rows a power of two long lie a multiple of
 # 4 KiB apart, and a loop that touches 13 of them at once then maps them to the same cache sets
 # (measured on the start kernel: 27 ns a lane unpadded, 5 ns padded)
