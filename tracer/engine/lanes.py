@@ -109,7 +109,8 @@ class LaneScene:
         fast, tex = fast_triangles(scene, lt)
         rows = [v[:, 0].T, (v[:, 1] - v[:, 0]).T, (v[:, 2] - v[:, 0]).T, surf.normal.T, vn[:, 0].T, vn[:, 1].T,
                 vn[:, 2].T]
-        if np.any(tex >= 0):
+        self.textured = bool(np.any(tex >= 0))  # some fast triangle's reflectance is a texture
+        if self.textured:
             uv = surf.uv if surf.uv.shape[0] else np.zeros((nf, 3, 2))
             rows.append(uv.reshape(nf, 6).T)
         self.geo = _as_rows(np.concatenate(rows), F)
@@ -497,6 +498,18 @@ def albedo_aov(li, n, kd, prim, fast_lane, state):
             aov_open[i] = False
 
 
+@kernel
+def flat_reflectance(n, prim, fast_lane, tl, kd):
+    """reflectance in a scene whose fast triangles hold no texture: each fast lane's material's
+    reflectance into kd."""
+    for k in prange(n):
+        p = prim[k]
+        pc = p if (p >= 0) & (fast_lane[k] != 0) else 0
+        kd[0, k] = tl[TL_KD, pc]
+        kd[1, k] = tl[TL_KD + 1, pc]
+        kd[2, k] = tl[TL_KD + 2, pc]
+
+
 @kernel(fastmath={"arcp", "contract", "nsz"})
 def reflectance(n, hit, prim, fast_lane, geo, tl, tinfo, tint, tdata, kd):
     """The diffuse reflectance at the vertex of each fast lane 0 .. n-1 into kd (3 rows): its
@@ -851,7 +864,11 @@ def run(ctx, buf, n, ps, stats, split=None):
                 ng, nc = int(ng), int(nc)
                 first = False
             if use_fast and ng < m:
-                reflectance(m, lanes.hit, lanes.prim, lanes.fast, ls.geo, ls.tl, ls.tinfo, ls.tint, ls.tdata, lanes.kd)
+                if ls.textured:
+                    reflectance(m, lanes.hit, lanes.prim, lanes.fast, ls.geo, ls.tl, ls.tinfo, ls.tint, ls.tdata,
+                                lanes.kd)
+                else:
+                    flat_reflectance(m, lanes.prim, lanes.fast, ls.tl, lanes.kd)
                 shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.tl, lanes.kd,
                       ls.alias_p, ls.alias_i, lim)
                 if nc:
