@@ -24,6 +24,8 @@ from .camera import camera_ray
 from .film import N_AOV
 from .rng import DIM_PIXEL, draw, no_primary_samples, path_key, primary_samples
 
+_CHUNKS = 256  # camera_paths: chunks of a wave, each on one thread
+
 
 @jit(inline="always")
 def _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, aov_open, prev_rec, gain):
@@ -69,33 +71,51 @@ def camera_paths(cam, width, height, crop, jitter, seed, sample0, g0, shift, who
     n = pix.shape[0]
     cw = crop[2]
     npix = crop[2] * crop[3]
-    for i in prange(n):
-        g = g0 + i
+    for c in prange(_CHUNKS):
+        # the pixel and sample of the chunk's first path by division, then counted on (a division
+        # per path cost about as much as the rest of the camera together)
+        i0 = c * n // _CHUNKS
+        g = g0 + i0
         s = sample0 + g // npix
         p = g % npix
-        px = crop[0] + p % cw
-        py = crop[1] + p // cw
-        k = path_key(seed, py * width + px, s)
-        jx = draw(ps, k, i, DIM_PIXEL) if jitter or whole_image else 0.5
-        jy = draw(ps, k, i, DIM_PIXEL + 1) if jitter or whole_image else 0.5
-        if whole_image:
-            fx = min(jx * cw, cw - 1e-9)
-            fy = min(jy * crop[3], crop[3] - 1e-9)
-            qx = int(fx)
-            qy = int(fy)
-            jx = fx - qx if jitter else 0.5
-            jy = fy - qy if jitter else 0.5
-            p = qy * cw + qx
+        qx = p % cw
+        qy = p // cw
+        for i in range(i0, (c + 1) * n // _CHUNKS):
+            if i > i0:
+                p += 1
+                qx += 1
+                if qx == cw:
+                    qx = 0
+                    qy += 1
+                if p == npix:
+                    p = 0
+                    qx = 0
+                    qy = 0
+                    s += 1
             px = crop[0] + qx
             py = crop[1] + qy
-        pix[i] = p
-        index[i] = p
-        key[i] = k
-        o, d = camera_ray(cam, width, height, px + shift[0], py + shift[1], jx, jy)
-        for c in range(3):
-            ray_o[i, c] = o[c]
-            ray_d[i, c] = d[c]
-        _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, aov_open, prev_rec, gain)
+            k = path_key(seed, py * width + px, s)
+            jx = draw(ps, k, i, DIM_PIXEL) if jitter or whole_image else 0.5
+            jy = draw(ps, k, i, DIM_PIXEL + 1) if jitter or whole_image else 0.5
+            f = p
+            if whole_image:
+                fx = min(jx * cw, cw - 1e-9)
+                fy = min(jy * crop[3], crop[3] - 1e-9)
+                wx = int(fx)
+                wy = int(fy)
+                jx = fx - wx if jitter else 0.5
+                jy = fy - wy if jitter else 0.5
+                f = wy * cw + wx
+                px = crop[0] + wx
+                py = crop[1] + wy
+            pix[i] = f
+            index[i] = f
+            key[i] = k
+            o, d = camera_ray(cam, width, height, px + shift[0], py + shift[1], jx, jy)
+            for q in range(3):
+                ray_o[i, q] = o[q]
+                ray_d[i, q] = d[q]
+            _reset(i, beta, L, depth, prev_pdf, prev_delta, aov, aov_open, prev_rec, gain)
 
 
 @kernel
