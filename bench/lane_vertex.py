@@ -40,7 +40,7 @@ import numpy as np
 from numba import njit, prange
 
 import tracer
-from tracer.engine import lanes
+from tracer.engine import lanes, sampling32
 from tracer.guiding.records import Records
 from tracer.integrators import path as path_mod
 from tracer.wave import Continuation, PathState, ShadowRays
@@ -64,18 +64,18 @@ LANES = 16 if "avx512f" in _cpuinfo() else 8
 FLAGS = {"arcp", "contract", "nsz"}
 
 # float32 constants (a Python float literal is float64 in Numba and would widen the arithmetic), the
-# lanes' random numbers and polynomial sincos: the engine's (tracer.engine.lanes)
-F = lanes.F
+# lanes' random numbers and polynomial sincos: the engine's (tracer.engine.sampling32)
+F = sampling32.F
 ZERO, ONE, HALF = F(0.0), F(1.0), F(0.5)
-INV_PI, TWO_PI, TINY, SHORT = lanes.INV_PI, F(2.0 * math.pi), lanes.TINY, lanes.SHORT
-Q_MAX = F(lanes.RR_MAX)
+INV_PI, TWO_PI, TINY, SHORT = sampling32.INV_PI, F(2.0 * math.pi), sampling32.TINY, sampling32.SHORT
+Q_MAX = F(sampling32.RR_MAX)
 U32 = np.uint32
-_rand = lanes.rand32  # float32 in [0, 1) from a 32-bit key and a dimension
-sincos_poly = lanes.sincos2pi
+_rand = sampling32.rand32  # float32 in [0, 1) from a 32-bit key and a dimension
+sincos_poly = sampling32.sincos2pi
 alias_table = lanes.alias_table
 # random dimensions of a bounce (tracer.rng's table: light choice, light position, direction, roulette)
-D_LIGHT, D_POS, D_DIR, D_RR = lanes.D_LIGHT, lanes.D_POS, lanes.D_DIR, lanes.D_RR
-BOUNCE, BLOCK = lanes.BOUNCE, lanes.BLOCK
+D_LIGHT, D_POS, D_DIR, D_RR = sampling32.D_LIGHT, sampling32.D_POS, sampling32.D_DIR, sampling32.D_RR
+BOUNCE, BLOCK = sampling32.BOUNCE, sampling32.BLOCK
 
 
 @njit(inline="always")
