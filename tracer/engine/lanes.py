@@ -450,18 +450,21 @@ def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, fl
                 b1 = np.float64(hit[1, k])
                 b2 = np.float64(hit[2, k])
                 b0 = 1.0 - b1 - b2
-                ns = np.empty(3)
+                nx = b0 * geo[G_VN, p] + b1 * geo[G_VN + 3, p] + b2 * geo[G_VN + 6, p]
+                ny = b0 * geo[G_VN + 1, p] + b1 * geo[G_VN + 4, p] + b2 * geo[G_VN + 7, p]
+                nz = b0 * geo[G_VN + 2, p] + b1 * geo[G_VN + 5, p] + b2 * geo[G_VN + 8, p]
+                c2 = nx * nx + ny * ny + nz * nz
+                if c2 > 0.0 and math.isfinite(c2):
+                    r = 1.0 / math.sqrt(c2)
+                    if nx * geo[G_N, p] + ny * geo[G_N + 1, p] + nz * geo[G_N + 2, p] < 0.0:
+                        r = -r
+                    nx, ny, nz = nx * r, ny * r, nz * r
+                else:
+                    nx, ny, nz = np.float64(geo[G_N, p]), np.float64(geo[G_N + 1, p]), np.float64(geo[G_N + 2, p])
+                aov[i, 3] = sgn * nx
+                aov[i, 4] = sgn * ny
+                aov[i, 5] = sgn * nz
                 for q in range(3):
-                    ns[q] = b0 * geo[G_VN + q, p] + b1 * geo[G_VN + 3 + q, p] + b2 * geo[G_VN + 6 + q, p]
-                c2 = ns[0] * ns[0] + ns[1] * ns[1] + ns[2] * ns[2]
-                towards = ns[0] * geo[G_N, p] + ns[1] * geo[G_N + 1, p] + ns[2] * geo[G_N + 2, p]
-                for q in range(3):
-                    if c2 > 0.0 and math.isfinite(c2):
-                        ns[q] = ns[q] / math.sqrt(c2) * (-1.0 if towards < 0.0 else 1.0)
-                    else:
-                        ns[q] = geo[G_N + q, p]
-                for q in range(3):
-                    aov[i, 3 + q] = sgn * ns[q]
                     L_cam[i, q] = lf[BR + q, k] * tl[TL_EMIT + q, p] * lit
                 aov[i, 6] = hit[H_T, k]
         counts[c + 1, 0] = g
