@@ -2,6 +2,7 @@
 
     python -m bench.embree_rate                       # mitsuba-cornell, open-1k, open-1m
     python -m bench.embree_rate --scenes open-1k --spp 1
+    python -m bench.embree_rate --path-loop lanes      # the rays as the lane engine issues them
 
 Renders each scene once at `--spp` (after an untimed render), capturing every batch the accel is
 asked (closest hits and shadow rays) and the scene's triangles (float32, less the accel's centre),
@@ -26,9 +27,12 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "bench", "results", "embree_rate")
 
 
-def capture(name, spp, folder):
+def capture(name, spp, folder, path_loop="thread"):
     """Write NAME.hdr (vertex, bounce-ray, shadow-ray counts), .v, .ray (origin, direction) and
-    .shadow (origin, direction, tmax), float32, coordinates less the accel's centre."""
+    .shadow (origin, direction, tmax), float32, coordinates less the accel's centre. With
+    path_loop "lanes", the rays the lane engine issues, in its order (capture_lanes)."""
+    if path_loop == "lanes":
+        return capture_lanes(name, spp, folder)
     scene = tracer.load_scene(throughput.scene_spec(name)["obj"])
     calls = {"i": [], "o": []}
     inter, occ = embree.EmbreeAccel.intersect, embree.EmbreeAccel.occluded
@@ -51,12 +55,47 @@ def capture(name, spp, folder):
     ray = np.concatenate([np.hstack([o - c, d]) for o, d in calls["i"][1:]])  # [0]: the warm-up path
     sh = np.concatenate([np.hstack([o - c, d, t[:, None]]) for o, d, t in calls["o"]])
     v = (scene.tri - c).astype(np.float32).reshape(-1, 3)
+    return _write(folder, name, v, ray, sh)
+
+
+def _write(folder, name, v, ray, sh):
     base = os.path.join(folder, name)
     np.array([len(v), len(ray), len(sh), 0], np.int64).tofile(base + ".hdr")
     v.tofile(base + ".v")
     ray.astype(np.float32).tofile(base + ".ray")
     sh.astype(np.float32).tofile(base + ".shadow")
     return len(ray), len(sh)
+
+
+def capture_lanes(name, spp, folder):
+    """capture for render(path_loop="lanes"): each bounce's closest-hit rays as the lanes hold them
+    (lanes 0 .. m-1 in order, packed 16 to a call), and its shadow rays in lane order (occlude packs
+    the next 16 lanes that have one)."""
+    from tracer.engine import lanes
+    from tracer.engine.rows import DX, OX, SDX, SHADOW, SOX, TMAX
+
+    scene = tracer.load_scene(throughput.scene_spec(name)["obj"])
+    calls = {"i": [], "o": []}
+    inter, occ = lanes.intersect, lanes.occlude
+
+    def record_i(fn, sc, scratch, lf, n, hit, prim):
+        calls["i"].append(np.vstack([lf[OX:OX + 3, :n], lf[DX:DX + 3, :n]]).T.copy())
+        return inter(fn, sc, scratch, lf, n, hit, prim)
+
+    def record_o(fn, sc, scratch, n, sh, flags, lf):
+        on = flags[SHADOW, :n] != 0
+        calls["o"].append(np.vstack([sh[SOX:SOX + 3, :n], sh[SDX:SDX + 3, :n], sh[TMAX:TMAX + 1, :n]]).T[on].copy())
+        return occ(fn, sc, scratch, n, sh, flags, lf)
+
+    tracer.render(scene, spp=1, max_depth=8, rr_depth=5, path_loop="lanes")
+    lanes.intersect, lanes.occlude = record_i, record_o
+    try:
+        tracer.render(scene, spp=spp, max_depth=8, rr_depth=5, path_loop="lanes")
+    finally:
+        lanes.intersect, lanes.occlude = inter, occ
+    c = 0.5 * (scene.bounds[0] + scene.bounds[1])  # the accel's centre (the lanes' rays are relative to it)
+    v = (scene.tri - c).astype(np.float32).reshape(-1, 3)
+    return _write(folder, name, v, np.concatenate(calls["i"]), np.concatenate(calls["o"]))
 
 
 def build(folder):
@@ -72,6 +111,8 @@ def main(argv=None):
     p.add_argument("--scenes", default="mitsuba-cornell,open-1k,open-1m")
     p.add_argument("--spp", type=int, default=1)
     p.add_argument("--quality", type=int, default=1, help="RTC build quality (0 low, 1 medium, 2 high)")
+    p.add_argument("--path-loop", default="thread", choices=("thread", "lanes"),
+                   help="whose rays: the per-thread loop's batches as the accel is asked, or the lanes' packets")
     a = p.parse_args(argv)
     if shutil.which("gcc") is None:
         print("bench.embree_rate needs gcc (with OpenMP) to build bench/embree_rate.c", file=sys.stderr)
@@ -79,7 +120,7 @@ def main(argv=None):
     os.makedirs(OUT, exist_ok=True)
     exe = build(OUT)
     for name in a.scenes.split(","):
-        n, ns = capture(name, a.spp, OUT)
+        n, ns = capture(name, a.spp, OUT, a.path_loop)
         print(f"# {name}: {n} closest-hit rays, {ns} shadow rays at {a.spp} spp", flush=True)
         subprocess.run([exe, OUT, name, str(a.quality)], check=True)
     return 0
