@@ -204,13 +204,20 @@ def test_textured_diffuse_on_the_fast_class():
              what="textured box: block means")
 
 
-def _coated_box(size):
+GLOSSY = {  # material name -> (type, alpha) for _glossy_box
+    "coats": {"white": ("COATED", 0.05), "red": ("COATED", 0.0)},
+    "metals": {"white": ("METAL", 0.15), "red": ("METAL", 0.0)},
+}
+
+
+def _glossy_box(size, kind):
     """The Cornell box with its light grown to most of the ceiling, through scenes.textured
-    (checkerboard reflectances, tilted corner normals), its white walls made a rough GGX plastic
-    (COATED, alpha 0.05, textured) and its red wall a smooth one (a mirror lobe beside the diffuse
-    base), both coats of index 2.5 (a strong specular lobe: light samples and BSDF samples both
-    find the light, so their MIS weights matter)."""
+    (checkerboard reflectances, tilted corner normals), its white walls and red wall made the
+    GLOSSY[kind] materials: coats (Mitsuba's plastic, index 2.5: a strong specular lobe, so that light
+    samples and BSDF samples both find the light and their MIS weights matter; the rough one
+    textured) or metals (gold's complex index; the rough one's specular reflectance textured)."""
     from tracer import bsdfs
+    from tracer.material import TEX_SLOT_KD, TEX_SLOT_KS
     from tracer.scene import prepare_coats
 
     scene = _scene("cornell", size)
@@ -219,39 +226,52 @@ def _coated_box(size):
     c = scene.tri[lit].reshape(-1, 3).mean(axis=0)
     scene.tri[lit] = c + (scene.tri[lit] - c) * np.array([2.5, 1.0, 2.5])
     scene = textured(scene)
-    for name, alpha in (("white", 0.05), ("red", 0.0)):
+    for name, (kind_name, alpha) in GLOSSY[kind].items():
         m = mats.names.index(name)
-        mats.type[m] = bsdfs.COATED
+        mats.type[m] = getattr(bsdfs, kind_name)
         mats.param[m, bsdfs.P_KS:bsdfs.P_KS + 3] = 1.0
         mats.param[m, bsdfs.P_ALPHA] = alpha
-        mats.param[m, bsdfs.P_IOR] = 2.5
+        if kind_name == "COATED":
+            mats.param[m, bsdfs.P_IOR] = 2.5
+        else:
+            mats.param[m, bsdfs.P_ETA:bsdfs.P_ETA + 3] = (0.18, 0.42, 1.37)
+            mats.param[m, bsdfs.P_K:bsdfs.P_K + 3] = (3.42, 2.35, 1.77)
+            mats.tex[m, TEX_SLOT_KS] = mats.tex[m, TEX_SLOT_KD] if alpha > 0.0 else -1
+            mats.tex[m, TEX_SLOT_KD] = -1
     prepare_coats(mats, scene.textures)
     return scene
 
 
-def test_coated_materials_on_their_own_kernel():
-    """_coated_box: the coated kernel shades the COATED vertices, the fast kernel the rest, none goes
-    to the general kernel, and the image equals the per-thread loop's in expectation. It detects
-    the light sample's MIS weight left out (+6% on the image), a mirror bounce not flagged delta
-    (its emission then MIS-weighted against a light sample that cannot find it: -3%), or the coat's
-    reflectance left untextured; not the light-leak rule dropped (the normals' tilts of ~10 degrees
-    leave too few such directions)."""
-    scene = _coated_box(32)
+@pytest.mark.parametrize("kind", ["coats", "metals"])
+def test_glossy_materials_on_their_own_kernel(kind):
+    """_glossy_box: the glossy kernel shades the COATED or METAL vertices, the fast kernel the rest,
+    none goes to the general kernel; with the same seed the AOV albedo equals the per-thread loop's
+    (a metal's: its colour times its Fresnel at normal incidence; behind a smooth metal, a delta
+    BSDF, the next vertex's), and the image equals the per-thread loop's in
+    expectation. It detects the light sample's MIS weight left out (+6% on the coats' image, +5%
+    on the metals'), a mirror bounce not flagged delta (its emission then MIS-weighted against a
+    light sample that cannot find it: -3%, -10%), or the colour left untextured (the coats' image,
+    the metals' AOV); not the light-leak rule dropped (the normals' tilts of ~10 degrees leave too
+    few such directions)."""
+    scene = _glossy_box(32, kind)
+    a = tracer.render(scene, spp=4, seed=3, path_loop="lanes", max_depth=3)
+    b = tracer.render(scene, spp=4, seed=3, path_loop="thread", max_depth=3)
+    np.testing.assert_allclose(a.aovs["albedo"], b.aovs["albedo"], rtol=2e-5, atol=2e-6)
     kw = dict(spp=96, max_depth=6)
     a = tracer.render(scene, seed=1, path_loop="lanes", **kw)
     b = tracer.render(scene, seed=2, path_loop="thread", **kw)
     assert_clean(a, "lanes")
     assert_clean(b, "thread")
     assert a.stats["lane_samples"] == a.stats["samples"]
-    assert a.stats["lane_general_vertices"] == 0 and a.stats["lane_coated_vertices"] > 0
+    assert a.stats["lane_general_vertices"] == 0 and a.stats["lane_glossy_vertices"] > 0
     ma, va = image_mean(a)
     mb, vb = image_mean(b)
-    assert_z(ma, va + vb, mb, what="coated box: image mean")
+    assert_z(ma, va + vb, mb, what=f"glossy box ({kind}): image mean")
     n = BLOCK * BLOCK
     var = (_blocks(a.variance.astype(np.float64)) + _blocks(b.variance.astype(np.float64))) / n
     keep = var > 0
     assert_z(_blocks(a.image.astype(np.float64))[keep], var[keep], _blocks(b.image.astype(np.float64))[keep],
-             what="coated box: block means")
+             what=f"glossy box ({kind}): block means")
 
 
 def test_lanes_aovs_are_the_first_hits():

@@ -397,7 +397,7 @@ def compile_plan(guided, integ, accel, path_loop="thread"):
     render, to say that a compile is coming."""
     names = list(integ.kernels())
     if path_loop == "lanes" and "thread_loop.trace_paths" in names and accel == "embree":
-        names += ["lanes.shade", "coated.shade_coated", "general.shade_general"]
+        names += ["lanes.shade", "glossy.shade_glossy", "general.shade_general"]
     if guided or (("thread_loop.trace_paths" in names) and (accel != "embree" or path_loop == "wave")):
         names = [n for n in names if n != "thread_loop.trace_paths"] + ["path.shade"]
         if guided and accel == "embree" and path_loop != "wave":
@@ -471,7 +471,7 @@ def _stats(scene, stats, passes, spp, t_setup, t_start, t_render, settings, t_co
         "split_copies": int(stats.split_copies),
         "lane_samples": int(stats.lane_samples),
         "lane_general_vertices": int(stats.lane_general),
-        "lane_coated_vertices": int(stats.lane_coated),
+        "lane_glossy_vertices": int(stats.lane_glossy),
         "window_ended": int(stats.window_ended),
         **settings,
         "texture_memory_bytes": scene.textures.nbytes if len(scene.textures) else 0,

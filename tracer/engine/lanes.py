@@ -39,14 +39,14 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit, kernel
-from ..bsdfs import COATED, DIFFUSE, ONE_SIDED, P_CLEAR, P_FLAGS, P_KD
+from ..bsdfs import COATED, DIFFUSE, METAL, ONE_SIDED, P_CLEAR, P_FLAGS, P_KD, P_KS
 from ..bvh.embree import _INTERSECT16, _LANES, _OCCLUDED16, _VALID, call4
 from ..bvh.numba_bvh import _NumbaThreads
 from ..lights import ENV_NONE
-from ..material import TEX_BITMAP, TEX_CONSTANT, TEX_SLOT_KD
+from ..material import TEX_BITMAP, TEX_CONSTANT, TEX_SLOT_BUMP, TEX_SLOT_KD, TEX_SLOT_KS, TEX_SLOT_OPACITY
 from ..splitting import make_copy, merge_copies, split_count
 from ..wave import TRACE_PARTS
-from .coated import shade_coated
+from .glossy import shade_glossy
 from .general import shade_general
 from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, FLAG_ROWS, FLOAT_ROWS, G_N, G_UV, G_VN, HIT_ROWS, H_T,
                    INT_ROWS, KEY, LB, LG, LR, L_LIGHTS, L_MAX, L_NEE, L_RR, OX, OY, OZ, PAD, PDF, SB, SDX, SDY, SDZ, SG,
@@ -57,9 +57,9 @@ from .sampling32 import (BIG, BLOCK, BOUNCE, D_DIR, D_LIGHT, D_POS, D_RR, F, HAL
 from .vertex import MAX_BOUNCES
 
 _CHUNKS = 64  # compaction: chunks counted, then written at their offsets
-# a vertex's class (LaneBuffers.fast, tl[TL_FAST]): the general kernel's, the fast kernel's (diffuse), the coated
-# kernel's (engine.coated)
-GENERAL, DIFFUSE_CLASS, COATED_CLASS = 0, 1, 2
+# a vertex's class (LaneBuffers.fast, tl[TL_FAST]): the general kernel's, the fast kernel's (diffuse), the glossy
+# kernel's (engine.glossy: coated plastics and metals)
+GENERAL, DIFFUSE_CLASS, GLOSSY_CLASS = 0, 1, 2
 
 
 class LaneBuffers:
@@ -78,7 +78,7 @@ class LaneBuffers:
         self.shadow = _rows(len(SHADOW_ROWS), size, F)
         self.kd = _rows(3, size, F)  # the fast class's reflectance at the vertex
         self.fast = np.zeros(size, np.int32)  # the lane's vertex is of the fast class
-        self.lists = np.zeros((2, size), np.int32)  # the lanes the general kernel shades, the coated kernel's
+        self.lists = np.zeros((2, size), np.int32)  # the lanes the general kernel shades, the glossy kernel's
         self.ks = np.ones(size, np.int64)  # split_lanes: copies of each lane (0: the window ended it)
 
 
@@ -120,7 +120,8 @@ class LaneScene:
         self.tl[TL_ONE_SIDED, :nf] = (param[:, P_FLAGS].astype(np.int64) & ONE_SIDED) != 0
         self.tl[TL_FAST, :nf] = fast
         self.tl[TL_TEX, :nf] = tex
-        self.tl[TL_KD:TL_KD + 3, :nf] = param[:, P_KD:P_KD + 3].T
+        col = np.where((surf.mat_type[surf.material] == METAL)[:, None], param[:, P_KS:P_KS + 3], param[:, P_KD:P_KD + 3])
+        self.tl[TL_KD:TL_KD + 3, :nf] = col.T  # the class's colour: a metal's specular reflectance, else the diffuse one
         if surf.tex_info.shape[0]:
             self.tinfo = surf.tex_info.astype(F)
             self.tint = surf.tex_info[:, 1:4].astype(np.int32)
@@ -183,11 +184,12 @@ def alias_table(p):
 
 
 def fast_triangles(scene, lights):
-    """((F,) int32, (F,) int32): each triangle's class (GENERAL, DIFFUSE_CLASS, COATED_CLASS) and
-    the texture of its reflectance (-1: none). In a scene lit by triangles only (the classes' NEE
-    samples nothing else) whose texels the lanes' 32-bit indices reach: DIFFUSE materials, and
-    COATED ones on triangles that do not emit, without opacity, bump or specular textures (the
-    reflectance may be a texture; vertex normals allowed). Every other triangle is GENERAL."""
+    """((F,) int32, (F,) int32): each triangle's class (GENERAL, DIFFUSE_CLASS, GLOSSY_CLASS) and
+    the texture of its colour (-1: none). In a scene lit by triangles only (the classes' NEE samples
+    nothing else) whose texels the lanes' 32-bit indices reach, opaque materials with no bump
+    texture: DIFFUSE ones (the colour is the reflectance); and on triangles that do not emit,
+    COATED ones (the colour is the diffuse reflectance; no specular texture) and METAL ones (the
+    colour is the specular reflectance; no diffuse texture). Every other triangle is GENERAL."""
     m = scene.materials
     nf = scene.tri.shape[0]
     none = np.full(nf, -1, np.int32)
@@ -195,16 +197,21 @@ def fast_triangles(scene, lights):
         return np.zeros(nf, np.int32), none
     mat = scene.tri_material
     opaque = m.param[:, P_CLEAR] == 0.0
-    cls = np.where((m.type == DIFFUSE) & opaque, DIFFUSE_CLASS, np.where((m.type == COATED) & opaque, COATED_CLASS,
-                                                                           GENERAL)).astype(np.int32)
-    kd = np.full(cls.shape[0], -1, np.int32)
+    metal = m.type == METAL
+    glossy = (m.type == COATED) | metal
+    cls = np.where((m.type == DIFFUSE) & opaque, DIFFUSE_CLASS,
+                   np.where(glossy & opaque, GLOSSY_CLASS, GENERAL)).astype(np.int32)
+    colour = np.full(cls.shape[0], -1, np.int32)
     if m.tex is not None and m.tex.shape[0]:
-        others = np.delete(m.tex, TEX_SLOT_KD, axis=1)
-        cls[np.any(others >= 0, axis=1)] = GENERAL
-        kd = np.where(cls != GENERAL, m.tex[:, TEX_SLOT_KD], -1).astype(np.int32)
+        other = np.where(metal, TEX_SLOT_KD, TEX_SLOT_KS)  # the slot that must be empty
+        rows = np.arange(cls.shape[0])
+        bad = (m.tex[rows, other] >= 0) | (m.tex[:, TEX_SLOT_BUMP] >= 0) | (m.tex[:, TEX_SLOT_OPACITY] >= 0)
+        cls[bad] = GENERAL
+        slot = np.where(metal, TEX_SLOT_KS, TEX_SLOT_KD)
+        colour = np.where(cls != GENERAL, m.tex[rows, slot], -1).astype(np.int32)
     tri_cls = cls[mat]
-    tri_cls[(tri_cls == COATED_CLASS) & np.any(m.emission[mat] > 0.0, axis=1)] = GENERAL
-    return tri_cls, kd[mat]
+    tri_cls[(tri_cls == GLOSSY_CLASS) & np.any(m.emission[mat] > 0.0, axis=1)] = GENERAL
+    return tri_cls, colour[mat]
 
 
 def usable(ctx, record, ps):
@@ -406,7 +413,7 @@ def intersect(fn, scene, scratch, lf, n, hit, prim):
 def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, flags, fast_lane, lists):
     """Mark each lane 0 .. n-1 with its vertex's class (fast_lane: with use_fast, a hit's triangle's
     tl[TL_FAST], an escape DIFFUSE_CLASS where escape_fast; else GENERAL), and list the GENERAL lanes
-    in order in lists[0], the COATED_CLASS ones in lists[1]; returns how many of each. A lane with ks 0
+    in order in lists[0], the GLOSSY_CLASS ones in lists[1]; returns how many of each. A lane with ks 0
     (split_lanes: the weight window ended its path) is in none: flags say it ends and has no shadow
     ray. For the lanes of the two classes it writes what shade_vertex writes into the
     wave's PathState `state` besides the path: at the camera ray's hit the AOVs' shading normal
@@ -434,7 +441,7 @@ def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, fl
             if cls == GENERAL:
                 g += 1
                 continue
-            if cls == COATED_CLASS:
+            if cls == GLOSSY_CLASS:
                 h += 1
             i = li[SLOT, k]
             first = li[DEPTH, k] == 0
@@ -481,7 +488,7 @@ def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, fl
             if fast_lane[k] == GENERAL:
                 lists[0, j] = k
                 j += 1
-            elif fast_lane[k] == COATED_CLASS:
+            elif fast_lane[k] == GLOSSY_CLASS:
                 lists[1, jc] = k
                 jc += 1
     return counts[_CHUNKS, 0], counts[_CHUNKS, 1]
@@ -489,13 +496,14 @@ def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, fl
 
 @kernel
 def albedo_aov(li, n, kd, prim, fast_lane, state):
-    """The AOV albedo of each path whose fast-class vertex in lanes 0 .. n-1 is its first that is not
-    a delta BSDF (aov_open): its reflectance (kd, reflectance's)."""
+    """The AOV albedo of each path whose diffuse-class vertex in lanes 0 .. n-1 is its first that is
+    not a delta BSDF (aov_open): its reflectance (kd, reflectance's). (The glossy kernel writes its
+    own lanes'.)"""
     aov = state.aov
     aov_open = state.aov_open
     for k in prange(n):
         i = li[SLOT, k]
-        if fast_lane[k] != 0 and prim[k] >= 0 and aov_open[i]:
+        if fast_lane[k] == DIFFUSE_CLASS and prim[k] >= 0 and aov_open[i]:
             for q in range(3):
                 aov[i, q] = kd[q, k]
             aov_open[i] = False
@@ -833,7 +841,7 @@ def run(ctx, buf, n, ps, stats, split=None):
     splitting = split is not None and buf.capacity > buf.size
     use_fast = fast_allowed(ctx.guide_state) and not splitting  # split_lanes reads the PathState
     n_slots = n
-    rays = shadows = general = coated = ended = 0
+    rays = shadows = general = glossy = ended = 0
     surf = ctx.surfaces
     part = dict.fromkeys(TRACE_PARTS, 0.0)  # seconds of each step
     clock = time.perf_counter
@@ -875,9 +883,9 @@ def run(ctx, buf, n, ps, stats, split=None):
                 shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.tl, lanes.kd,
                       ls.alias_p, ls.alias_i, lim)
                 if nc:
-                    shade_coated(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :nc], ls.geo, ls.tl,
-                                 lanes.kd, ls.alias_p, ls.alias_i, lim, surf.mat_param, surf.material, surf.mat_table)
-                    coated += nc
+                    shade_glossy(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :nc], ls.geo, ls.tl,
+                                 lanes.kd, ls.alias_p, ls.alias_i, lim, surf, state)
+                    glossy += nc
                 if classified:
                     albedo_aov(li, m, lanes.kd, lanes.prim, lanes.fast, state)
             if ng:
@@ -899,7 +907,7 @@ def run(ctx, buf, n, ps, stats, split=None):
     stats.shadow_rays += shadows
     stats.lane_samples += n
     stats.lane_general += general
-    stats.lane_coated += coated
+    stats.lane_glossy += glossy
     for name, sec in part.items():
         stats.trace_parts[name] += sec
     stats.tick("trace", t0)

@@ -1,6 +1,6 @@
 """The lanes' float32 arithmetic: constants, the 32-bit random numbers and the helpers that LLVM
 packs 8 or 16 lanes to an instruction (scalar arguments only, 32-bit integers: docs/throughput.md,
-"The lane engine"). The fast class's kernels and the coated class's draw their random numbers here.
+"The lane engine"). The fast class's kernels and the glossy class's draw their random numbers here.
 """
 import math
 

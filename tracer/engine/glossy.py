@@ -1,15 +1,20 @@
-"""The lanes' second class: Mitsuba's plastic and roughplastic (bsdfs.COATED), one kernel.
+"""The lanes' glossy class: Mitsuba's plastic and roughplastic (bsdfs.COATED) and its conductor
+and roughconductor (bsdfs.METAL), one listed kernel.
 
-`shade_coated` shades the lanes classify listed as coated: opaque COATED triangles that do not
-emit, whose reflectance may be textured (the reflectance kernel's kd rows) but nothing else, in a
-scene lit by triangles only. Per lane, in float64 through the BSDF's own functions
-(bsdfs._coated_eval_pdf, _coated_sample: the rough coat's GGX or Beckmann lobe and the smooth
-coat's mirror lobe beside the diffuse base): a light sample from the alias table with MIS by the
-power heuristic, the sampled continuation (a delta flag where the mirror lobe was picked), the
-roulette, as shade_vertex does them with no guide. The random numbers are the fast class's
-(lanes.rand32 of the lane's key at tracer.rng's dimensions), so the images agree with the other
-loops' in expectation. A module of its own: Numba caches by file, and this kernel inlines the
-coat's functions.
+`shade_glossy` shades the lanes classify listed as glossy: opaque triangles of those materials
+that do not emit, whose colour (the coat's diffuse reflectance, the metal's specular one) may be
+a texture (the reflectance kernel's kd rows) but nothing else, in a scene lit by triangles only.
+Per lane, in float64 through the BSDF's own functions (bsdfs._coated_eval_pdf, _coated_sample:
+the rough coat's GGX or Beckmann lobe and the smooth coat's mirror lobe beside the diffuse base;
+bsdfs._metal_eval_pdf, _metal_sample: GGX or Beckmann, a mirror at alpha 0): the AOV albedo
+where the path's is open (bsdfs.bsdf_albedo's; a smooth metal, a delta BSDF, leaves it open for
+the next vertex), a
+light sample from the alias table with MIS by the power heuristic (none at a smooth metal), the
+sampled continuation (a delta flag where a mirror lobe was picked), the roulette, as
+shade_vertex does them with no guide. The random numbers are the fast class's (sampling32.rand32
+of the lane's key at tracer.rng's dimensions), so the images agree with the other loops' in
+expectation. A module of its own: Numba caches by file, and this kernel inlines the BSDFs'
+functions.
 """
 import math
 
@@ -17,31 +22,38 @@ import numpy as np
 from numba import prange
 
 from .._jit import kernel
-from ..bsdfs import ONE_SIDED, _coated_eval_pdf, _coated_sample
+from ..bsdfs import COATED, ONE_SIDED, _coated_eval_pdf, _coated_sample, _metal_eval_pdf, _metal_f, _metal_sample
 from ..sampling import dot, frame, to_local, to_world
-from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, G_N, G_VN, KEY, OX, OY, OZ, PDF, SDX, SDY, SDZ,
-                   SHADOW, SOX, SOY, SOZ, SR, SG, SB, TL_AREA, TL_EMIT, TL_EPS, TL_SEL, TMAX, L_MAX, L_NEE,
-                   L_RR, L_SMOOTH, L_LIGHTS)
+from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, G_N, G_VN, KEY, L_LIGHTS, L_MAX, L_NEE, L_RR,
+                   L_SMOOTH, OX, OY, OZ, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SLOT, SOX, SOY, SOZ, SR, TL_AREA,
+                   TL_EMIT, TL_EPS, TL_SEL, TMAX)
 from .sampling32 import BLOCK, BOUNCE, D_DIR, D_LIGHT, D_LOBE, D_POS, D_RR, RR_MAX, SHORT, rand32
 from .vertex import MAX_BOUNCES
 
 
 @kernel
-def shade_coated(lf, li, hit, prim, sh, flags, coated, geo, tl, kd, alias_p, alias_i, lim, mat_param, material,
-                 table):
-    """Shade the vertex of each lane coated[0 ..] (classify's list; its triangle's material COATED,
-    mat_param's row with the reflectance kd[:, lane] in place of its own, table the scene's coat
-    tables): the NEE sample into the shadow rows (flags[SHADOW]), the sampled next ray, throughput,
-    density, delta flag and depth into the lane, the roulette into flags[ALIVE]. The scene's rows
-    (geo, tl, alias_p, alias_i) and lim as lanes.shade takes them."""
+def shade_glossy(lf, li, hit, prim, sh, flags, glossy, geo, tl, kd, alias_p, alias_i, lim, surf, state):
+    """Shade the vertex of each lane glossy[0 ..] (classify's list; its triangle's material, COATED
+    or METAL, from the material.Surfaces `surf`, its parameters with the colour kd[:, lane] in
+    place of its reflectance (COATED) or specular reflectance (METAL)): the AOV
+    albedo into the wave's PathState `state` where aov_open, the NEE sample into the shadow rows
+    (flags[SHADOW]), the sampled next ray, throughput, density, delta flag and depth into the lane,
+    the roulette into flags[ALIVE]. The scene's rows (geo, tl, alias_p, alias_i) and lim as
+    lanes.shade takes them."""
     rr_depth = lim[L_RR]
     max_depth = lim[L_MAX]
     nee = lim[L_NEE] != 0
     smooth = lim[L_SMOOTH] != 0
     nl = alias_p.shape[0]
     lights = lim[L_LIGHTS] > 0
-    for j in prange(coated.shape[0]):
-        k = coated[j]
+    aov = state.aov
+    aov_open = state.aov_open
+    material = surf.material
+    mat_type = surf.mat_type
+    mat_param = surf.mat_param
+    table = surf.mat_table
+    for j in prange(glossy.shape[0]):
+        k = glossy[j]
         p = prim[k]
         d = (np.float64(lf[DX, k]), np.float64(lf[DY, k]), np.float64(lf[DZ, k]))
         b1 = np.float64(hit[1, k])
@@ -66,11 +78,21 @@ def shade_coated(lf, li, hit, prim, sh, flags, coated, geo, tl, kd, alias_p, ali
         s, t = frame(ns)
         wo = to_local((-d[0], -d[1], -d[2]), s, t, ns)
         m = material[p]
-        prm = (np.float64(kd[0, k]), np.float64(kd[1, k]), np.float64(kd[2, k]), mat_param[m, 3], mat_param[m, 4],
-               mat_param[m, 5], mat_param[m, 6], mat_param[m, 7], mat_param[m, 8], mat_param[m, 9],
-               mat_param[m, 10], mat_param[m, 11], mat_param[m, 12], mat_param[m, 13], mat_param[m, 14],
-               mat_param[m, 15], mat_param[m, 16])
-        black = (int(prm[14]) & ONE_SIDED) != 0 and wo[2] <= 0.0  # a one-sided coat seen from behind
+        coat = mat_type[m] == COATED
+        c0, c1, c2 = np.float64(kd[0, k]), np.float64(kd[1, k]), np.float64(kd[2, k])  # the colour
+        prm = ((c0, c1, c2, mat_param[m, 3], mat_param[m, 4], mat_param[m, 5]) if coat else
+               (mat_param[m, 0], mat_param[m, 1], mat_param[m, 2], c0, c1, c2))
+        prm = prm + (mat_param[m, 6], mat_param[m, 7], mat_param[m, 8], mat_param[m, 9], mat_param[m, 10],
+                     mat_param[m, 11], mat_param[m, 12], mat_param[m, 13], mat_param[m, 14], mat_param[m, 15],
+                     mat_param[m, 16])
+        smooth_metal = not coat and prm[6] <= 0.0  # a delta BSDF: no light sample
+        i = li[SLOT, k]
+        if aov_open[i]:  # bsdfs.bsdf_albedo's; a delta BSDF writes its own and leaves the AOV open
+            alb = (c0, c1, c2) if coat else _metal_f(prm, 1.0)
+            for q in range(3):
+                aov[i, q] = alb[q]
+            aov_open[i] = smooth_metal
+        black = (int(prm[14]) & ONE_SIDED) != 0 and wo[2] <= 0.0  # a one-sided surface seen from behind
         beta = (np.float64(lf[BR, k]), np.float64(lf[BG, k]), np.float64(lf[BB, k]))
         depth = li[DEPTH, k]
         key = li[KEY, k]
@@ -81,7 +103,7 @@ def shade_coated(lf, li, hit, prim, sh, flags, coated, geo, tl, kd, alias_p, ali
         # a light sample: an emissive triangle from the alias table, a point uniform on it, MIS
         # against the coat's own density of that direction
         shadow = False
-        if on and nee and lights:
+        if on and nee and lights and not smooth_metal:
             us = np.float64(rand32(key, base + D_LIGHT)) * nl
             c = min(int(us), nl - 1)
             lj = alias_i[0, c] if us - c < alias_p[c] else alias_i[1, c]
@@ -99,7 +121,7 @@ def shade_coated(lf, li, hit, prim, sh, flags, coated, geo, tl, kd, alias_p, ali
                 if cos_l > 0.0:
                     pls = tl[TL_SEL, lj] * d2 / (tl[TL_AREA, lj] * cos_l)
                     wil = to_local(wl, s, t, ns)
-                    f, pb = _coated_eval_pdf(prm, table, wo, wil)
+                    f, pb = _coated_eval_pdf(prm, table, wo, wil) if coat else _metal_eval_pdf(prm, wo, wil)
                     leak = smooth and ((wo[2] * wil[2] > 0.0) != (cos_o * dot(wl, ng) > 0.0))
                     g = pls / (pls * pls + pb * pb)  # the power heuristic's weight over pls
                     if not leak and pls > 0.0 and (f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0):
@@ -123,7 +145,10 @@ def shade_coated(lf, li, hit, prim, sh, flags, coated, geo, tl, kd, alias_p, ali
             u0 = np.float64(rand32(key, base + D_DIR))
             u1 = np.float64(rand32(key, base + D_DIR + 1))
             ul = np.float64(rand32(key, base + D_LOBE))
-            wi, wt, pdf, dlt = _coated_sample(prm, table, wo, u0, u1, ul)
+            if coat:
+                wi, wt, pdf, dlt = _coated_sample(prm, table, wo, u0, u1, ul)
+            else:
+                wi, wt, pdf, dlt = _metal_sample(prm, wo, u0, u1)
             wiw = to_world(wi, s, t, ns)
             if smooth and ((wo[2] * wi[2] > 0.0) != (cos_o * dot(wiw, ng) > 0.0)):
                 wt = (0.0, 0.0, 0.0)
