@@ -1,31 +1,37 @@
 """A wave of paths as float32 lanes: rows of float32 and int32 matrices, [field, lane].
 
-The lane state is declared once (engine.rows: FLOAT_ROWS, INT_ROWS, FLAG_ROWS): `LaneBuffers` allocates it
-from the declaration, and `compact` copies a lane by copying every row, so a new field is one
-name there. A bounce runs these kernels over lanes 0 .. m-1:
+The lane state is declared once (engine.rows: FLOAT_ROWS, INT_ROWS, FLAG_ROWS): `LaneBuffers`
+allocates it from the declaration, and `compact` copies a lane by copying every row, so a new
+field is one name there. A bounce runs these kernels over lanes 0 .. m-1:
 
 - `intersect`: closest hits, 16 lanes to one rtcIntersect16 (Embree's float32 hit, no float64
   refinement: the hit point is rebuilt from the barycentrics, on the triangle's plane);
 - `split_lanes` (a guide's final passes with splitting or the weight window): copies appended
   as new lanes, lanes the window ended marked;
-- `classify`: which lanes' vertices are of the fast class (a diffuse triangle without textures or
-  opacity, flat or with corner normals, in a scene lit by triangles only; or an escape with no
-  environment), their AOVs and L_cam; the others listed for the general kernel;
-- `shade`: the fast class, one `prange` over the lanes that LLVM packs 8 or 16 to an instruction
-  (the body holds no helper that takes arrays and no `and` chain, integers stay 32-bit:
-  docs/throughput.md; the other lanes keep what the general kernel reads): emission with its
-  MIS weight, a light sample with MIS (alias table, a point uniform on the triangle), a cosine
-  bounce, the roulette;
-- `shade_general` (engine.general): the listed lanes, each through engine.vertex.shade_vertex in float64 (every
-  material, texture and light), its results written into the lanes;
-- `occlude`: the shadow rays of both, packed 16 to one rtcOccluded16, adding the unblocked ones;
+- `classify`: each lane's class, from its triangle's (fast_triangles, in a scene lit by
+  triangles only): the diffuse class (diffuse, its reflectance possibly a texture, flat or with
+  corner normals; or an escape with no environment), the glossy class (opaque coats and metals
+  that do not emit), or general; the AOVs and L_cam of the first two at the camera ray's hit; the
+  glossy and general lanes listed;
+- `reflectance` (`flat_reflectance` where no fast triangle is textured): each fast lane's colour,
+  its texture evaluated;
+- `shade`: the diffuse class, one `prange` over the lanes that LLVM packs 8 or 16 to an
+  instruction (the body holds no helper that takes arrays and no `and` chain, integers stay
+  32-bit: docs/throughput.md; the other lanes keep what the other kernels read): emission with
+  its MIS weight, a light sample with MIS (alias table, a point uniform on the triangle), a cosine
+  bounce, the roulette; `albedo_aov` its lanes' AOV albedo;
+- `shade_glossy` (engine.glossy): the glossy lanes, each through its BSDF's own functions;
+- `shade_general` (engine.general): the general lanes, each through engine.vertex.shade_vertex in
+  float64 (every material, texture and light), its results written into the lanes;
+- `occlude`: the shadow rays of all three, packed 16 to one rtcOccluded16, adding the unblocked
+  ones;
 - `compact`: the ended paths' radiance out to the wave's path slots (float64), and the lanes
   that go on moved into the holes they left, so that lanes 0 .. m-1 hold the m paths left.
 
-Positions are relative to the accel's centre, as Embree holds the scene. The fast class draws its
-random numbers from a 32-bit hash of the path's key folded to 32 bits and the dimension
-(tracer.rng's layout of a bounce's dimensions), the general kernel from the key itself as the
-other path loops do: the images agree with theirs in expectation, not bit for bit
+Positions are relative to the accel's centre, as Embree holds the scene. The diffuse and glossy
+classes draw their random numbers from a 32-bit hash of the path's key folded to 32 bits and the
+dimension (tracer.rng's layout of a bounce's dimensions), the general kernel from the key itself
+as the other path loops do: the images agree with theirs in expectation, not bit for bit
 (tests/test_engine.py z-tests them).
 
 What a wave needs to run here (`usable`): Embree, and a pass that neither records nor takes
@@ -93,9 +99,10 @@ class LaneScene:
     """The scene as the lanes read it, float32 rows per triangle (padded: _rows; engine.rows): geo
     (21 rows, 27 with UVs) v0 - centre, e1, e2, the unit geometric normal, the three corner normals
     (zero: none), the corner UVs where a fast triangle is textured (rows G_*); tl (TL_ROWS)
-    NEE's probability of choosing the triangle, its area, its ray offset, 1 if one-sided, 1 if its
-    vertices are of the fast class (fast_triangles), its reflectance's texture (-1: none), its
-    reflectance and emitted radiance (rows TL_*); the textures the fast class reads: tinfo (T, 16)
+    NEE's probability of choosing the triangle, its area, its ray offset, 1 if one-sided, its
+    vertices' class (fast_triangles), its colour's texture (-1: none), its colour (a metal's
+    specular reflectance, else its diffuse reflectance) and emitted radiance (rows TL_*); the
+    textures the classes read: tinfo (T, 16)
     float32 the rows of tracer.material's texture table, tint (T, 3) int32 their texel offset,
     width and height, tdata the texels (one constant row when the scene has none); the alias table
     over the emissive triangles (alias_p: the probability of keeping column j; alias_i (2,
@@ -120,8 +127,8 @@ class LaneScene:
         self.tl[TL_ONE_SIDED, :nf] = (param[:, P_FLAGS].astype(np.int64) & ONE_SIDED) != 0
         self.tl[TL_FAST, :nf] = fast
         self.tl[TL_TEX, :nf] = tex
-        col = np.where((surf.mat_type[surf.material] == METAL)[:, None], param[:, P_KS:P_KS + 3], param[:, P_KD:P_KD + 3])
-        self.tl[TL_KD:TL_KD + 3, :nf] = col.T  # the class's colour: a metal's specular reflectance, else the diffuse one
+        metal = (surf.mat_type[surf.material] == METAL)[:, None]
+        self.tl[TL_KD:TL_KD + 3, :nf] = np.where(metal, param[:, P_KS:P_KS + 3], param[:, P_KD:P_KD + 3]).T
         if surf.tex_info.shape[0]:
             self.tinfo = surf.tex_info.astype(F)
             self.tint = surf.tex_info[:, 1:4].astype(np.int32)

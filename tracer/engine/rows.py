@@ -24,10 +24,10 @@ SOX, SOY, SOZ, SDX, SDY, SDZ, TMAX, SR, SG, SB = range(len(SHADOW_ROWS))
 HIT_ROWS = ("t", "b1", "b2")
 H_T, H_B1, H_B2 = range(len(HIT_ROWS))
 # The scene's rows per triangle: geo (the corner v0, the edges e1, e2, the geometric normal, the
-# corner normals vn0, vn1, vn2: three rows each; in a scene whose fast class holds a texture, the
-# corner UVs u0 v0 u1 v1 u2 v2) and tl (NEE's probability of choosing it, its area, its ray
-# offset, 1 if one-sided, 1 if of the fast class, its reflectance's texture (-1: none), its
-# reflectance and its emitted radiance, three rows each)
+# corner normals vn0, vn1, vn2: three rows each; in a scene where some classed triangle is
+# textured, the corner UVs u0 v0 u1 v1 u2 v2) and tl (NEE's probability of choosing it, its area,
+# its ray offset, 1 if one-sided, its vertices' class (lanes.fast_triangles), its colour's texture
+# (-1: none), its colour and its emitted radiance, three rows each)
 G_V0, G_E1, G_E2, G_N, G_VN, G_UV = 0, 3, 6, 9, 12, 21
 TL_SEL, TL_AREA, TL_EPS, TL_ONE_SIDED, TL_FAST, TL_TEX, TL_KD, TL_EMIT = 0, 1, 2, 3, 4, 5, 6, 9
 TL_ROWS = 12
