@@ -3,6 +3,7 @@
     python -m bench.vs_mitsuba --scene-dir ../shared/scenes-mitsuba --scenes cornell-box,veach-mis \\
         --width 320 --height 180 --spp 64 --seeds 4 --out bench/summary/mitsuba_scenes/table.md
     python -m bench.vs_mitsuba path/to/scene.xml --spp 256
+    python -m bench.vs_mitsuba --scene-dir ../shared/scenes-mitsuba --scenes bathroom --path-loop lanes
     python -m bench.vs_mitsuba envlit --width 64 --height 48 --spp 32 --seeds 4   # or envlit-mask, ...
     python -m bench.vs_mitsuba delta --width 64 --height 48 --spp 64 --seeds 4    # or delta-spot, ...
 
@@ -246,6 +247,7 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--seeds", type=int, default=4, help="renders per side (standard errors from their spread)")
     ap.add_argument("--out", help="write the table (markdown) here")
+    ap.add_argument("--path-loop", default="thread", help="our renders' path loop (render(path_loop=...))")
     a = ap.parse_args(argv)
     paths = [p for name in a.scene for p in scene_paths(name)]
     if a.scene_dir:
@@ -257,7 +259,7 @@ def main(argv=None):
         name = os.path.basename(os.path.dirname(os.path.abspath(path)))
         scene = tracer.load_scene(path, width=a.width, height=a.height, allow_missing=True)
         t0 = time.perf_counter()
-        ours = np.stack([tracer.render(scene, spp=a.spp, seed=100 + k, pixel_filter="box").image
+        ours = np.stack([tracer.render(scene, spp=a.spp, seed=100 + k, pixel_filter="box", path_loop=a.path_loop).image
                          for k in range(a.seeds)]).astype(np.float64)
         t_ours = (time.perf_counter() - t0) / a.seeds
         theirs, t_mi, notes = mitsuba_render(path, a.width, a.height, a.spp, a.seeds, allow_missing=True)
@@ -277,7 +279,8 @@ def main(argv=None):
             print(f"  copy for Mitsuba: {n}")
         sys.stdout.flush()
     if a.out:
-        lines = [f"Tracer vs Mitsuba 3.9.1 `scalar_rgb` on the same scene files: {a.width}x{a.height}, {a.spp} spp, "
+        lines = [f"Tracer (path loop {a.path_loop}) vs Mitsuba 3.9.1 `scalar_rgb` on the same scene files: "
+                 f"{a.width}x{a.height}, {a.spp} spp, "
                  f"{a.seeds} seeds per side, box filter. Command: `python -m bench.vs_mitsuba "
                  f"{' '.join(argv if argv is not None else sys.argv[1:])}`.", "",
                  "| scene | max depth | mean, ours (rgb) | mean, Mitsuba | difference % | z | excess | agrees | "
