@@ -73,6 +73,21 @@ def _blocks(a):
     return a[: h * BLOCK, : w * BLOCK].reshape(h, BLOCK, w, BLOCK, 3).mean(axis=(1, 3)).reshape(-1, 3)
 
 
+def _assert_same_image(a, b, what, lit_share=0.0):
+    """z-tests of the image means of renders a and b (independent seeds) and of their BLOCK x BLOCK
+    block means, each side's variance from its own film (a block mean's: its pixels' mean variance
+    over BLOCK^2); blocks with no variance on either side are left out, at most 1 - lit_share of
+    them."""
+    ma, va = image_mean(a)
+    mb, vb = image_mean(b)
+    assert_z(ma, va + vb, mb, what=f"{what}: image mean")
+    var = (_blocks(a.variance.astype(np.float64)) + _blocks(b.variance.astype(np.float64))) / (BLOCK * BLOCK)
+    keep = var > 0
+    assert keep.sum() > lit_share * keep.size
+    assert_z(_blocks(a.image.astype(np.float64))[keep], var[keep], _blocks(b.image.astype(np.float64))[keep],
+             what=f"{what}: {BLOCK}x{BLOCK} block means")
+
+
 @pytest.mark.parametrize("name, kw, general", [
     ("cornell", dict(max_depth=8, rr_depth=2), False),  # roulette from the second bounce: compaction at every depth
     ("ajar", dict(max_depth=-1), False),  # unlimited depth, an area light behind a door
@@ -93,16 +108,7 @@ def test_lanes_equal_the_per_thread_loop_in_expectation(name, kw, general):
     assert a.stats["lane_samples"] == a.stats["samples"] > 0, "some pass did not run on the lanes"
     assert b.stats["lane_samples"] == 0
     assert (a.stats["lane_general_vertices"] > 0) == general
-    ma, va = image_mean(a)
-    mb, vb = image_mean(b)
-    assert_z(ma, va + vb, mb, what=f"{name}: image mean, lanes against thread")
-    n = BLOCK * BLOCK
-    ia, ib = a.image.astype(np.float64), b.image.astype(np.float64)
-    vpa, vpb = a.variance.astype(np.float64), b.variance.astype(np.float64)
-    var = (_blocks(vpa) + _blocks(vpb)) / n  # the variance of a block mean: the pixels' mean variance / n
-    keep = var > 0
-    assert keep.sum() > 0.5 * keep.size
-    assert_z(_blocks(ia)[keep], var[keep], _blocks(ib)[keep], what=f"{name}: {BLOCK}x{BLOCK} block means")
+    _assert_same_image(a, b, f"{name}, lanes against thread", lit_share=0.5)
 
 
 @pytest.mark.parametrize("guide", ["grid:iterations=2", "ppg:iterations=2,window=0", "photon:iterations=2",
@@ -141,14 +147,7 @@ def test_smooth_shading_on_the_fast_class(tmp_path):
     b = tracer.render(scene, seed=2, path_loop="thread", **kw)
     assert_clean(a, "lanes")
     assert a.stats["lane_general_vertices"] == 0 and a.stats["lane_samples"] == a.stats["samples"]
-    ma, va = image_mean(a)
-    mb, vb = image_mean(b)
-    assert_z(ma, va + vb, mb, what="smooth sphere: image mean")
-    n = BLOCK * BLOCK
-    var = (_blocks(a.variance.astype(np.float64)) + _blocks(b.variance.astype(np.float64))) / n
-    keep = var > 0
-    assert_z(_blocks(a.image.astype(np.float64))[keep], var[keep], _blocks(b.image.astype(np.float64))[keep],
-             what="smooth sphere: block means")
+    _assert_same_image(a, b, "smooth sphere")
     a4, b4 = (tracer.render(scene, spp=4, seed=3, path_loop=loop, max_depth=2) for loop in ("lanes", "thread"))
     np.testing.assert_allclose(a4.aovs["normal"], b4.aovs["normal"], atol=2e-6)
 
@@ -194,14 +193,7 @@ def test_textured_diffuse_on_the_fast_class():
     a = tracer.render(scene, seed=1, path_loop="lanes", **kw)
     b = tracer.render(scene, seed=2, path_loop="thread", **kw)
     assert_clean(a, "lanes")
-    ma, va = image_mean(a)
-    mb, vb = image_mean(b)
-    assert_z(ma, va + vb, mb, what="textured box: image mean")
-    n = BLOCK * BLOCK
-    var = (_blocks(a.variance.astype(np.float64)) + _blocks(b.variance.astype(np.float64))) / n
-    keep = var > 0
-    assert_z(_blocks(a.image.astype(np.float64))[keep], var[keep], _blocks(b.image.astype(np.float64))[keep],
-             what="textured box: block means")
+    _assert_same_image(a, b, "textured box")
 
 
 GLOSSY = {  # material name -> (type, alpha) for _glossy_box
@@ -264,14 +256,7 @@ def test_glossy_materials_on_their_own_kernel(kind):
     assert_clean(b, "thread")
     assert a.stats["lane_samples"] == a.stats["samples"]
     assert a.stats["lane_general_vertices"] == 0 and a.stats["lane_glossy_vertices"] > 0
-    ma, va = image_mean(a)
-    mb, vb = image_mean(b)
-    assert_z(ma, va + vb, mb, what=f"glossy box ({kind}): image mean")
-    n = BLOCK * BLOCK
-    var = (_blocks(a.variance.astype(np.float64)) + _blocks(b.variance.astype(np.float64))) / n
-    keep = var > 0
-    assert_z(_blocks(a.image.astype(np.float64))[keep], var[keep], _blocks(b.image.astype(np.float64))[keep],
-             what=f"glossy box ({kind}): block means")
+    _assert_same_image(a, b, f"glossy box ({kind})")
 
 
 def test_lanes_aovs_are_the_first_hits():
