@@ -21,14 +21,34 @@ import math
 import numpy as np
 from numba import prange
 
-from .._jit import kernel
+from .._jit import jit, kernel
 from ..bsdfs import COATED, ONE_SIDED, _coated_eval_pdf, _coated_sample, _metal_eval_pdf, _metal_f, _metal_sample
 from ..sampling import dot, frame, to_local, to_world
+from ..shading import offset_point
 from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, G_N, G_VN, KEY, L_LIGHTS, L_MAX, L_NEE, L_RR,
                    L_SMOOTH, OX, OY, OZ, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SLOT, SOX, SOY, SOZ, SR, TL_AREA,
                    TL_EMIT, TL_EPS, TL_SEL, TMAX)
 from .sampling32 import BLOCK, BOUNCE, D_DIR, D_LIGHT, D_LOBE, D_POS, D_RR, RR_MAX, SHORT, rand32
 from .vertex import MAX_BOUNCES
+
+
+@jit(inline="always")
+def corner_normal(geo, p, b1, b2):
+    """The shading normal of triangle p at barycentrics (b1, b2), float64, from the lanes' geo rows
+    (engine.rows): its corner normals interpolated, turned into the geometric normal's hemisphere;
+    the geometric normal where they vanish (as material.shading_normal)."""
+    b0 = 1.0 - b1 - b2
+    n = (b0 * geo[G_VN, p] + b1 * geo[G_VN + 3, p] + b2 * geo[G_VN + 6, p],
+         b0 * geo[G_VN + 1, p] + b1 * geo[G_VN + 4, p] + b2 * geo[G_VN + 7, p],
+         b0 * geo[G_VN + 2, p] + b1 * geo[G_VN + 5, p] + b2 * geo[G_VN + 8, p])
+    ng = (np.float64(geo[G_N, p]), np.float64(geo[G_N + 1, p]), np.float64(geo[G_N + 2, p]))
+    c2 = dot(n, n)
+    if not (c2 > 0.0 and math.isfinite(c2)):
+        return ng
+    r = 1.0 / math.sqrt(c2)
+    if dot(n, ng) < 0.0:
+        r = -r
+    return (n[0] * r, n[1] * r, n[2] * r)
 
 
 @kernel
@@ -58,23 +78,12 @@ def shade_glossy(lf, li, hit, prim, sh, flags, glossy, geo, tl, kd, alias_p, ali
         d = (np.float64(lf[DX, k]), np.float64(lf[DY, k]), np.float64(lf[DZ, k]))
         b1 = np.float64(hit[1, k])
         b2 = np.float64(hit[2, k])
-        b0 = 1.0 - b1 - b2
         x = (geo[0, p] + b1 * np.float64(geo[3, p]) + b2 * np.float64(geo[6, p]),
              geo[1, p] + b1 * np.float64(geo[4, p]) + b2 * np.float64(geo[7, p]),
              geo[2, p] + b1 * np.float64(geo[5, p]) + b2 * np.float64(geo[8, p]))
         ng = (np.float64(geo[G_N, p]), np.float64(geo[G_N + 1, p]), np.float64(geo[G_N + 2, p]))
         cos_o = -dot(d, ng)
-        # the shading normal: the corner normals interpolated, in ng's hemisphere (ng where they vanish)
-        n = (b0 * geo[G_VN, p] + b1 * geo[G_VN + 3, p] + b2 * geo[G_VN + 6, p],
-             b0 * geo[G_VN + 1, p] + b1 * geo[G_VN + 4, p] + b2 * geo[G_VN + 7, p],
-             b0 * geo[G_VN + 2, p] + b1 * geo[G_VN + 5, p] + b2 * geo[G_VN + 8, p])
-        c2 = dot(n, n)
-        ns = ng
-        if c2 > 0.0 and math.isfinite(c2):
-            r = 1.0 / math.sqrt(c2)
-            if dot(n, ng) < 0.0:
-                r = -r
-            ns = (n[0] * r, n[1] * r, n[2] * r)
+        ns = corner_normal(geo, p, b1, b2)
         s, t = frame(ns)
         wo = to_local((-d[0], -d[1], -d[2]), s, t, ns)
         m = material[p]
@@ -125,11 +134,11 @@ def shade_glossy(lf, li, hit, prim, sh, flags, glossy, geo, tl, kd, alias_p, ali
                     leak = smooth and ((wo[2] * wil[2] > 0.0) != (cos_o * dot(wl, ng) > 0.0))
                     g = pls / (pls * pls + pb * pb)  # the power heuristic's weight over pls
                     if not leak and pls > 0.0 and (f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0):
-                        e = eps if dot(wl, ng) >= 0.0 else -eps
+                        so = offset_point(x, ng, wl, eps)
                         shadow = True
-                        sh[SOX, k] = x[0] + e * ng[0]
-                        sh[SOY, k] = x[1] + e * ng[1]
-                        sh[SOZ, k] = x[2] + e * ng[2]
+                        sh[SOX, k] = so[0]
+                        sh[SOY, k] = so[1]
+                        sh[SOZ, k] = so[2]
                         sh[SDX, k] = wl[0]
                         sh[SDY, k] = wl[1]
                         sh[SDZ, k] = wl[2]
@@ -160,10 +169,10 @@ def shade_glossy(lf, li, hit, prim, sh, flags, glossy, geo, tl, kd, alias_p, ali
                 go = np.float64(rand32(key, base + D_RR)) < q
                 nb = (nb[0] / q, nb[1] / q, nb[2] / q)
             if go:
-                e = eps if dot(wiw, ng) >= 0.0 else -eps
-                lf[OX, k] = x[0] + e * ng[0]
-                lf[OY, k] = x[1] + e * ng[1]
-                lf[OZ, k] = x[2] + e * ng[2]
+                o = offset_point(x, ng, wiw, eps)
+                lf[OX, k] = o[0]
+                lf[OY, k] = o[1]
+                lf[OZ, k] = o[2]
                 lf[DX, k] = wiw[0]
                 lf[DY, k] = wiw[1]
                 lf[DZ, k] = wiw[2]

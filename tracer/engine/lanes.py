@@ -52,8 +52,8 @@ from ..lights import ENV_NONE
 from ..material import TEX_BITMAP, TEX_CONSTANT, TEX_SLOT_BUMP, TEX_SLOT_KD, TEX_SLOT_KS, TEX_SLOT_OPACITY
 from ..splitting import make_copy, merge_copies, split_count
 from ..wave import TRACE_PARTS
-from .glossy import shade_glossy
 from .general import shade_general
+from .glossy import corner_normal, shade_glossy
 from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, FLAG_ROWS, FLOAT_ROWS, G_N, G_UV, G_VN, HIT_ROWS, H_T,
                    INT_ROWS, KEY, LB, LG, LR, L_LIGHTS, L_MAX, L_NEE, L_RR, OX, OY, OZ, PAD, PDF, SB, SDX, SDY, SDZ, SG,
                    SHADOW, SHADOW_ROWS, SLOT, SOX, SOY, SOZ, SR, TL_AREA, TL_EMIT, TL_EPS, TL_FAST, TL_KD, TL_ONE_SIDED,
@@ -461,23 +461,9 @@ def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, fl
                 cos_o = -(lf[DX, k] * geo[G_N, p] + lf[DY, k] * geo[G_N + 1, p] + lf[DZ, k] * geo[G_N + 2, p])
                 sgn = 1.0 if cos_o >= 0.0 else -1.0
                 lit = 1.0 if cos_o > 0.0 else 0.0
-                b1 = np.float64(hit[1, k])
-                b2 = np.float64(hit[2, k])
-                b0 = 1.0 - b1 - b2
-                nx = b0 * geo[G_VN, p] + b1 * geo[G_VN + 3, p] + b2 * geo[G_VN + 6, p]
-                ny = b0 * geo[G_VN + 1, p] + b1 * geo[G_VN + 4, p] + b2 * geo[G_VN + 7, p]
-                nz = b0 * geo[G_VN + 2, p] + b1 * geo[G_VN + 5, p] + b2 * geo[G_VN + 8, p]
-                c2 = nx * nx + ny * ny + nz * nz
-                if c2 > 0.0 and math.isfinite(c2):
-                    r = 1.0 / math.sqrt(c2)
-                    if nx * geo[G_N, p] + ny * geo[G_N + 1, p] + nz * geo[G_N + 2, p] < 0.0:
-                        r = -r
-                    nx, ny, nz = nx * r, ny * r, nz * r
-                else:
-                    nx, ny, nz = np.float64(geo[G_N, p]), np.float64(geo[G_N + 1, p]), np.float64(geo[G_N + 2, p])
-                aov[i, 3] = sgn * nx
-                aov[i, 4] = sgn * ny
-                aov[i, 5] = sgn * nz
+                ns = corner_normal(geo, p, np.float64(hit[1, k]), np.float64(hit[2, k]))
+                for q in range(3):
+                    aov[i, 3 + q] = sgn * ns[q]
                 for q in range(3):
                     L_cam[i, q] = lf[BR + q, k] * tl[TL_EMIT + q, p] * lit
                 aov[i, 6] = hit[H_T, k]
