@@ -136,6 +136,58 @@ def test_grid_lookup_matches_the_boxes_after_splits(n_class):
     assert (root == cell * n_class + cls).all()
 
 
+def _split_median_one_leaf_at_a_time(g, points, threshold, max_levels, normals):
+    """The slow twin of HierarchicalGrid.split_median: a leaf at a time, depth first, np.median."""
+    nodes = g.locate(points, normals)
+    todo = [(nd, points[nodes == nd], 0) for nd in np.unique(nodes[nodes >= 0])
+            if (nodes == nd).sum() > threshold and g.data_slot[nd] >= 0]
+    while todo:
+        nd, pts, lvl = todo.pop()
+        a = int(g.depth[nd] % 3)
+        lo, hi = g.box_lo[nd, a], g.box_hi[nd, a]
+        v = float(np.median(pts[:, a]))
+        right = pts[:, a] >= v
+        if not (lo < v < hi) or right.all() or not right.any():
+            v = 0.5 * (lo + hi)
+            right = pts[:, a] >= v
+        c = int(g._split(np.array([nd]), np.array([v]))[0])
+        g.node_count[c], g.node_count[c + 1] = (~right).sum(), right.sum()
+        if lvl + 1 < max_levels:
+            todo += [(j, sub, lvl + 1) for j, sub in ((c, pts[~right]), (c + 1, pts[right])) if len(sub) > threshold]
+
+
+def _leaf_table(g):
+    """The leaves as sorted rows (box corners, count, has a slot): the tree's shape whatever its
+    node numbering."""
+    leaves = g.leaves()
+    rows = np.column_stack([g.box_lo[leaves], g.box_hi[leaves], g.node_count[leaves], g.data_slot[leaves] >= 0])
+    return rows[np.lexsort(rows.T[::-1])]
+
+
+@pytest.mark.parametrize("levels", [1, 3])
+def test_median_splits_in_batches_match_one_leaf_at_a_time(levels):
+    """split_median splits a level's leaves in one batch; the tree it builds has the leaves (boxes,
+    counts, slots) of the leaf-at-a-time twin, on clustered points, a cell whose points all
+    coincide (the mid-plane fallback), ties on the median and an even count's mean. Detects a
+    wrong median (e.g. the upper middle point of an even count), a missed fallback, wrong counts
+    handed to the children, or a level too many or too few."""
+    rng = np.random.default_rng(5)
+    box = np.array([4.0, 2.0, 3.0])
+    pts = np.concatenate([rng.random((6000, 3)) * box, 0.4 + 0.05 * rng.random((6000, 3)),  # a cluster
+                          np.tile([[1.3269, 1.5, 1.5]], (3000, 1)),  # coincident at their cell's low x: fallback
+                          np.round(rng.random((2000, 3)) * box, 1)])  # ties
+    nrm = rng.normal(size=pts.shape)
+    grids = [HierarchicalGrid(np.zeros(3), box, 4, 4, 8, 6) for _ in range(2)]
+    unvisited = rng.random(pts.shape[0]) < 0.1  # some leaves hold points but no slot
+    for g in grids:
+        g.visit(g.locate(pts[~unvisited], nrm[~unvisited]), 0)
+    n = grids[0].split_median(pts, threshold=100, max_levels=levels, normals=nrm)
+    _split_median_one_leaf_at_a_time(grids[1], pts, 100, levels, nrm)
+    assert n > 6 * levels and n == (grids[1].n_nodes - grids[1].n_cells) // 2
+    np.testing.assert_array_equal(_leaf_table(grids[0]), _leaf_table(grids[1]))
+    assert grids[0].depth[: grids[0].n_nodes].max() == levels
+
+
 def test_mid_plane_splits_pass_each_voxels_data_to_its_children():
     """split_mid splits a level at a time in batches: every leaf whose count c exceeds the
     threshold T becomes 2^L leaves, L = min(max_levels, the least k with c / 2^k <= T), that tile

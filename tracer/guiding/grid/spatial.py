@@ -15,8 +15,9 @@ middle plane (later iterations); a split's children inherit the parent's data ha
 and its mixing weight, and must be visited again to stay in use.
 """
 import numpy as np
+from numba import prange
 
-from ..._jit import jit
+from ..._jit import jit, kernel
 from ..contract import GuideState, locate_batch, no_pixel_maps
 from ..directional import direction_bin
 
@@ -103,6 +104,92 @@ def _splat_importance(node, strategy, prev, x, n_theta, n_phi, data_slot, ipower
 # per data slot: histogram, counts, previous map and counts, sampling tables; the same for importance maps
 SLOT_ARRAYS = ("power", "count", "prev", "pcount", "rowcum", "dens", "wsum", "pscale", "ipower", "irowcum", "idens", "iwsum",
                "ipscale")
+
+
+@kernel
+def _median_plan(points, node, todo, box_lo, box_hi, depth, threshold, max_levels):
+    """The median splits of HierarchicalGrid.split_median, planned without touching the grid, the
+    leaves `todo` in parallel (node: each point's leaf). Each leaf's splits form a heap (entry 1 the
+    leaf, entries 2h and 2h + 1 the sides of entry h): an entry splits its points at their median
+    along its depth's axis (at the mid-plane where the median leaves a side empty or lies on the
+    box's face), and a side holding more than threshold points is an entry of the next level, up to
+    max_levels levels. Returns, per leaf and heap entry: whether it splits, the plane, and the
+    points left and right of it."""
+    k = todo.shape[0]
+    which = np.full(box_lo.shape[0], -1, np.int64)
+    for i in range(k):
+        which[todo[i]] = i
+    start = np.zeros(k + 1, np.int64)
+    for j in range(node.shape[0]):
+        if node[j] >= 0 and which[node[j]] >= 0:
+            start[which[node[j]] + 1] += 1
+    for i in range(k):
+        start[i + 1] += start[i]
+    fill = start[:k].copy()
+    xyz = np.empty((start[k], 3))  # the points by leaf; each split moves its left side's rows first
+    for j in range(node.shape[0]):
+        if node[j] >= 0 and which[node[j]] >= 0:
+            t = which[node[j]]
+            xyz[fill[t]] = points[j]
+            fill[t] += 1
+    n_heap = 1 << max_levels
+    split = np.zeros((k, n_heap), np.bool_)
+    value = np.zeros((k, n_heap))
+    n_left = np.zeros((k, n_heap))
+    n_right = np.zeros((k, n_heap))
+    seg = np.zeros((k, n_heap, 2), np.int64)
+    lo = np.zeros((k, n_heap, 3))
+    hi = np.zeros((k, n_heap, 3))
+    coord = np.empty(start[k])
+    for i in prange(k):
+        split[i, 1] = True
+        seg[i, 1, 0] = start[i]
+        seg[i, 1, 1] = start[i + 1]
+        lo[i, 1] = box_lo[todo[i]]
+        hi[i, 1] = box_hi[todo[i]]
+        for h in range(1, n_heap):
+            if not split[i, h]:
+                continue
+            lvl = 0
+            while (h >> (lvl + 1)) > 0:
+                lvl += 1
+            a = (depth[todo[i]] + lvl) % 3
+            s0 = seg[i, h, 0]
+            cnt = seg[i, h, 1] - s0
+            for j in range(s0, s0 + cnt):
+                coord[j] = xyz[j, a]
+            v = np.median(coord[s0:s0 + cnt])
+            nr = 0
+            for j in range(s0, s0 + cnt):
+                if coord[j] >= v:
+                    nr += 1
+            if not (lo[i, h, a] < v < hi[i, h, a]) or nr == cnt or nr == 0:
+                v = 0.5 * (lo[i, h, a] + hi[i, h, a])
+            nl = 0  # rows below v to the front, swapped in place
+            for j in range(s0, s0 + cnt):
+                if xyz[j, a] < v:
+                    for c in range(3):
+                        xyz[s0 + nl, c], xyz[j, c] = xyz[j, c], xyz[s0 + nl, c]
+                    nl += 1
+            value[i, h] = v
+            n_left[i, h] = nl
+            n_right[i, h] = cnt - nl
+            if 2 * h < n_heap:
+                for side in range(2):
+                    c0 = s0 if side == 0 else s0 + nl
+                    c1 = s0 + nl if side == 0 else s0 + cnt
+                    if c1 - c0 > threshold:
+                        ch = 2 * h + side
+                        split[i, ch] = True
+                        seg[i, ch, 0] = c0
+                        seg[i, ch, 1] = c1
+                        lo[i, ch] = lo[i, h]
+                        hi[i, ch] = hi[i, h]
+                        if side == 0:
+                            hi[i, ch, a] = v
+                        else:
+                            lo[i, ch, a] = v
+    return split, value, n_left, n_right
 
 
 class HierarchicalGrid:
@@ -377,35 +464,31 @@ class HierarchicalGrid:
     def split_median(self, points, threshold, max_levels=3, normals=None):
         """Initialisation phase: split leaves with slots that hold more than threshold of `points`
         (m, 3, with their facing `normals`) at the median point (middle plane where the median
-        cannot separate them)."""
-        nodes = self.locate(points, normals)
-        order = np.argsort(nodes, kind="stable")
-        nodes_sorted = nodes[order]
-        starts = np.searchsorted(nodes_sorted, np.arange(self.n_nodes + 1))
-        n_split = 0
-        todo = []
-        for nd in self.leaves():
-            k0, k1 = starts[nd], starts[nd + 1]
-            if k1 - k0 > threshold and self.data_slot[nd] >= 0:
-                todo.append((int(nd), points[order[k0:k1]], 0))
-        while todo:
-            nd, pts, lvl = todo.pop()
-            a = int(self.depth[nd] % 3)
-            lo, hi = self.box_lo[nd, a], self.box_hi[nd, a]
-            v = float(np.median(pts[:, a]))
-            right = pts[:, a] >= v
-            if not (lo < v < hi) or right.all() or not right.any():
-                v = 0.5 * (lo + hi)
-                right = pts[:, a] >= v
-            c = int(self._split(np.array([nd]), np.array([v]))[0])
-            n_split += 1
-            self.node_count[c] = float((~right).sum())
-            self.node_count[c + 1] = float(right.sum())
-            if lvl + 1 < max_levels:
-                for j, sub in ((c, pts[~right]), (c + 1, pts[right])):
-                    if sub.shape[0] > threshold:
-                        todo.append((j, sub, lvl + 1))
-        return n_split
+        cannot separate them), again in the children that hold more than threshold, up to
+        max_levels new levels. The planes come from one jitted pass over the points
+        (`_median_plan`); the splits are made a level at a time, every leaf of it in one batch.
+        Returns the number of splits."""
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        node = self.locate(points, normals)
+        n = self.n_nodes
+        todo = np.flatnonzero((np.bincount(node[node >= 0], minlength=n) > threshold) & (self.data_slot[:n] >= 0))
+        if todo.size == 0:
+            return 0
+        split, value, n_left, n_right = _median_plan(points, node, todo, self.box_lo[:n], self.box_hi[:n],
+                                                     self.depth[:n], float(threshold), max(int(max_levels), 1))
+        left = np.zeros(split.shape, np.int64)  # each heap entry's left child, once split
+        h0 = 1
+        while h0 < split.shape[1]:  # a level at a time: heap entries h0 .. 2 h0 - 1
+            i, h = np.nonzero(split[:, h0:2 * h0])
+            if i.size == 0:
+                break
+            h += h0
+            nodes = todo[i] if h0 == 1 else left[i, h >> 1] + (h & 1)
+            left[i, h] = c = self._split(nodes, value[i, h])
+            self.node_count[c] = n_left[i, h]
+            self.node_count[c + 1] = n_right[i, h]
+            h0 *= 2
+        return int(split.sum())
 
     # --- data -----------------------------------------------------------------------------------
     def accumulate(self, nodes, bins, values):
