@@ -26,7 +26,8 @@ _MIXING = {
 # the histogram guides on a hierarchical grid (guiding.grid.guides): grid, photon
 _WINDOW = {  # the splitting and weight-window settings of every guide that plays them (tracer.splitting)
     "split": "final passes split paths whose throughput exceeds this (0: off)",
-    "window": "weight window: final passes split paths expected to bring more than this x their pixel (0: off)",
+    "window": "weight window: final passes split paths expected to bring more than this x their pixel "
+              "(0: off; auto: 3 without NEE, off with)",
     "window_low": "weight window: roulette paths expected to bring less than this x their pixel "
                   "(auto: 0.2 without NEE, 0.05 with)",
 }

@@ -47,6 +47,7 @@ WINDOW_MIN_SURVIVAL = 0.05  # the weight window's roulette keeps a path with at 
 # what it goes on to hit, and 0.2 ends the dim ones sooner: photon's relMSE at equal time 0.75-0.81x
 # that of 0.05 on NEE-off veach-ajar and classroom-sky, 0.99x on dining-room-sky.
 WINDOW_LOW = {True: 0.05, False: 0.2}
+WINDOW_AUTO = {True: 0.0, False: 3.0}  # window "auto" (grid): on without NEE only
 
 
 @jit(inline="always")
@@ -259,14 +260,16 @@ class WeightWindow:
     """A guide's splitting settings and what its window learns.
 
     split: throughput splitting threshold (0 off, else >= 1); window, window_low: the window's
-    bounds hi and low as shares of the pixel (window 0: off); window_low "auto" is resolved by
-    resolve() for the render (WINDOW_LOW). `pixel_est` is set by plan() from the training passes'
-    image and kept, so that a frozen copy of the guide can plan final passes without training
-    passes of its own."""
+    bounds hi and low as shares of the pixel (window 0: off); "auto" for either is resolved by
+    resolve() for the render (WINDOW_AUTO, WINDOW_LOW; until then an auto window counts as on, so
+    that wave buffers sized before it keep room for copies). `pixel_est` is set by plan() from the
+    training passes' image and kept, so that a frozen copy of the guide can plan final passes
+    without training passes of its own."""
 
     def __init__(self, split=0.0, window=0.0, window_low=0.0):
         self.split = float(split)
-        self.window = float(window)
+        self.window_auto = window == "auto"
+        self.window = WINDOW_AUTO[False] if self.window_auto else float(window)
         self.low_auto = window_low == "auto"
         self.window_low = WINDOW_LOW[True] if self.low_auto else float(window_low)
         if 0.0 < self.split < 1.0:
@@ -279,8 +282,10 @@ class WeightWindow:
         self.pixel_est = None
 
     def resolve(self, nee):
-        """For a render with (nee True) or without next-event estimation: window_low "auto" becomes
-        WINDOW_LOW[nee]; the window_low in use."""
+        """For a render with (nee True) or without next-event estimation: window "auto" becomes
+        WINDOW_AUTO[nee], window_low "auto" WINDOW_LOW[nee]; the window_low in use."""
+        if self.window_auto:
+            self.window = WINDOW_AUTO[bool(nee)]
         if self.low_auto:
             self.window_low = WINDOW_LOW[bool(nee)]
         return self.window_low

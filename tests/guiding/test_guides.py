@@ -460,6 +460,19 @@ def test_window_low_auto_follows_next_event_estimation():
             assert r.stats["guide_stats"]["window_low"] == expect, (integrator, setting)
 
 
+def test_grid_window_auto_follows_next_event_estimation():
+    """grid's default window "auto" is off (0) in a render with next-event estimation and 3 x the
+    pixel without (the values docs/guiding.md gives, written here), in the guide's window and its
+    stats; a number given stays as given. Detects auto resolved the wrong way round or not at all
+    (an unresolved auto reads 3, so that buffers sized before the render keep room for copies)."""
+    for integrator, want in (("path", 0.0), ("path:nee=0", 3.0)):
+        for setting, expect in (({}, want), ({"window": 2.0}, 2.0)):
+            g = make_guide("grid", iterations=1, **setting)
+            r = tracer.render(_scene("cornell", 16, 16), spp=4, guide=g, integrator=integrator, seed=7)
+            assert g.splitting.window == expect, (integrator, setting)
+            assert r.stats["guide_stats"]["window"] == expect, (integrator, setting)
+
+
 @pytest.mark.parametrize("bad", [{"reference_photons": -1.0}, {"reference_photons": "8"}, {"reference_sigma": -0.5}])
 def test_reference_map_settings_are_checked(bad):
     with pytest.raises(SettingsError, match="reference"):

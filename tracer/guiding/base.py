@@ -63,11 +63,11 @@ def _float(name, v, lo, hi=math.inf):
 
 
 def window_settings(s):
-    """The splitting.WeightWindow of the settings dict s (`split`, `window`, `window_low`: a number or
+    """The splitting.WeightWindow of the settings dict s (`split`; `window`, `window_low`: a number or
     "auto")."""
-    low = s["window_low"]
-    low = "auto" if isinstance(low, str) and low == "auto" else _float("window_low", low, 0.0)
-    return WeightWindow(_float("split", s["split"], 0.0), _float("window", s["window"], 0.0), low)
+    hi, low = (v if isinstance(v, str) and v == "auto" else _float(k, v, 0.0)
+               for k, v in (("window", s["window"]), ("window_low", s["window_low"])))
+    return WeightWindow(_float("split", s["split"], 0.0), hi, low)
 
 
 class Guide:

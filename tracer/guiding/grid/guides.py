@@ -24,7 +24,7 @@ Both follow Algorithm 1 of Zhu et al. 2021 (Photon-Driven Neural Reconstruction 
   practical path guiding learns the radiance alone; why: docs/guiding.md);
   the maps are rebuilt from every iteration's vertices alone.
 
-Splitting and the weight window (`split`, `window`, `window_low`; on for `photon` by default): the
+Splitting and the weight window (`split`, `window`, `window_low`; on for `photon`, for `grid` without NEE): the
 final passes split overweight paths and roulette those expected to bring little
 (tracer.splitting). For the window, each voxel learns from the training records the mean
 radiance that camera paths arriving in it went on to collect (splitting.outgoing); the
@@ -214,7 +214,8 @@ class HistogramGuide(Guide):
         self.reconstructor.maps_inferred = 0
         self.peak_memory = 0
         self.info = {"photons": 0, "deposits": 0, "photon_rays": 0, "vertices": 0, "switched_off": False,
-                     "roulette": self.resolve_roulette(ctx), "window_low": self.splitting.resolve(ctx.nee)}
+                     "roulette": self.resolve_roulette(ctx), "window_low": self.splitting.resolve(ctx.nee),
+                     "window": self.splitting.window}
         self._mixing = VarianceMixing(self.alpha_min, self.alpha_max, self.q_thr, self.switch_off,
                                       self.records_direct(ctx))
 
@@ -395,7 +396,7 @@ class GridGuide(HistogramGuide):
 
     name = "grid"
     # coarser and smoother than the photon maps: camera-path estimates (radiance |cos| / pdf) are noisier
-    DEFAULTS = dict(COMMON, split_c=4000.0, resolution=8, sigma=2.0, roulette="path")
+    DEFAULTS = dict(COMMON, split_c=4000.0, resolution=8, sigma=2.0, window="auto", window_low="auto")
 
     def _initial_data(self, pilot):
         g = self.grid
