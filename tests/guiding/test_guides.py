@@ -447,30 +447,21 @@ def test_window_settings_are_checked(bad):
         make_guide("photon", **bad)
 
 
-def test_window_low_auto_follows_next_event_estimation():
+@pytest.mark.parametrize("guide, key, with_nee, without, given",
+                         [("photon", "window_low", 0.05, 0.2, 0.1), ("grid", "window", 0.0, 3.0, 2.0)])
+def test_window_auto_follows_next_event_estimation(guide, key, with_nee, without, given):
     """photon's default window_low "auto" is 0.05 of the pixel in a render with next-event
-    estimation and 0.2 without (the values docs/guiding.md gives, written here), in the guide's
-    window and its stats; a number given stays as given. Detects auto resolved the wrong way round,
-    not at all, or over a user's number."""
-    for integrator, want in (("path", 0.05), ("path:nee=0", 0.2)):
-        for setting, expect in (({}, want), ({"window_low": 0.1}, 0.1)):
-            g = make_guide("photon", iterations=1, **setting)
+    estimation and 0.2 without; grid's window "auto" is off (0) with it and 3 x the pixel without
+    (the values docs/guiding.md gives, written here), in the guide's window and its stats; a number
+    given stays as given. Detects auto resolved the wrong way round, not at all (an unresolved auto
+    window reads 3, so that buffers sized before the render keep room for copies), or over a
+    user's number."""
+    for integrator, want in (("path", with_nee), ("path:nee=0", without)):
+        for setting, expect in (({}, want), ({key: given}, given)):
+            g = make_guide(guide, iterations=1, **setting)
             r = tracer.render(_scene("cornell", 16, 16), spp=4, guide=g, integrator=integrator, seed=7)
-            assert g.splitting.window_low == expect, (integrator, setting)
-            assert r.stats["guide_stats"]["window_low"] == expect, (integrator, setting)
-
-
-def test_grid_window_auto_follows_next_event_estimation():
-    """grid's default window "auto" is off (0) in a render with next-event estimation and 3 x the
-    pixel without (the values docs/guiding.md gives, written here), in the guide's window and its
-    stats; a number given stays as given. Detects auto resolved the wrong way round or not at all
-    (an unresolved auto reads 3, so that buffers sized before the render keep room for copies)."""
-    for integrator, want in (("path", 0.0), ("path:nee=0", 3.0)):
-        for setting, expect in (({}, want), ({"window": 2.0}, 2.0)):
-            g = make_guide("grid", iterations=1, **setting)
-            r = tracer.render(_scene("cornell", 16, 16), spp=4, guide=g, integrator=integrator, seed=7)
-            assert g.splitting.window == expect, (integrator, setting)
-            assert r.stats["guide_stats"]["window"] == expect, (integrator, setting)
+            assert getattr(g.splitting, key) == expect, (integrator, setting)
+            assert r.stats["guide_stats"][key] == expect, (integrator, setting)
 
 
 @pytest.mark.parametrize("bad", [{"reference_photons": -1.0}, {"reference_photons": "8"}, {"reference_sigma": -0.5}])
