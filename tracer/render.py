@@ -266,6 +266,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     integ.start()
     if g is not None and not integ.nee:
         g.learn_direct = True  # without NEE, the direct light is the guide's to find too
+    if g is not None:
+        g.follow_nee(integ.nee)
     npix = crop[2] * crop[3]
     wave = check_memory(scene, crop, wave_size, spp if time is None else None, g, integ)
 

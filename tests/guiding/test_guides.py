@@ -453,15 +453,20 @@ def test_window_auto_follows_next_event_estimation(guide, key, with_nee, without
     """photon's default window_low "auto" is 0.05 of the pixel in a render with next-event
     estimation and 0.2 without; grid's window "auto" is off (0) with it and 3 x the pixel without
     (the values docs/guiding.md gives, written here), in the guide's window and its stats; a number
-    given stays as given. Detects auto resolved the wrong way round, not at all (an unresolved auto
-    window reads 3, so that buffers sized before the render keep room for copies), or over a
-    user's number."""
+    given stays as given; grid's follow_nee settles it before a render. Detects auto resolved the
+    wrong way round, not at all (an unresolved auto window reads 3, so that buffers sized before the
+    render keep room for copies), or over a user's number."""
     for integrator, want in (("path", with_nee), ("path:nee=0", without)):
         for setting, expect in (({}, want), ({key: given}, given)):
             g = make_guide(guide, iterations=1, **setting)
             r = tracer.render(_scene("cornell", 16, 16), spp=4, guide=g, integrator=integrator, seed=7)
             assert getattr(g.splitting, key) == expect, (integrator, setting)
             assert r.stats["guide_stats"][key] == expect, (integrator, setting)
+    if key == "window":  # settled before the render sizes its buffers: no room for copies with NEE
+        for nee in (True, False):
+            g = make_guide(guide)
+            g.follow_nee(nee)
+            assert g.splits == (not nee)
 
 
 @pytest.mark.parametrize("bad", [{"reference_photons": -1.0}, {"reference_photons": "8"}, {"reference_sigma": -0.5}])

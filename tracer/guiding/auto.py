@@ -96,6 +96,10 @@ class AutoGuide(Guide):
         """Whether the final passes may split paths: any candidate that might win may."""
         return any(g.splits for g in self.guides)
 
+    def follow_nee(self, nee):
+        for g in self.guides:
+            g.follow_nee(nee)
+
     @property
     def training(self):
         """The winner's Algorithm 1 record (None before a guide has won, or where bsdf won)."""

@@ -125,6 +125,12 @@ class Guide:
         """Whether final passes may split paths (the wave buffers then need room for copies)."""
         return self.splitting is not None and self.splitting.active
 
+    def follow_nee(self, nee):
+        """Settle the settings that follow next-event estimation (the window's "auto" bounds) before
+        the render sizes its buffers and compiles its kernels."""
+        if self.splitting is not None:
+            self.splitting.resolve(nee)
+
     def records_direct(self, ctx):
         """Whether this render's records (and photon maps) carry the emission a direction hits
         directly: with `learn_direct`, or with next-event estimation off (nothing else samples it)."""
