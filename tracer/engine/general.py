@@ -39,10 +39,10 @@ def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, p
         depth[i] = li[DEPTH, k]
         prev_pdf[i] = lf[PDF, k]
         prev_delta[i] = li[DELTA, k] != 0
-        wray = (np.float64(lf[DX, k]), np.float64(lf[DY, k]), np.float64(lf[DZ, k]))
-        v = shade_vertex(i, wray, np.float64(hit[0, k]), prim[k], np.float64(hit[1, k]), np.float64(hit[2, k]), surf,
-                         lt, gs, ps, max_depth, rr_depth, nee, beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key,
-                         pix, aov, aov_open)
+        v = shade_vertex((i, np.float64(lf[DX, k]), np.float64(lf[DY, k]), np.float64(lf[DZ, k]), np.float64(hit[0, k]),
+                          prim[k], np.float64(hit[1, k]), np.float64(hit[2, k])),
+                         surf, lt, gs, ps, (max_depth, rr_depth, nee), beta, L, L_cam, depth, prev_pdf, prev_delta,
+                         gain, (key, pix), aov, aov_open)
         flags[ALIVE, k] = np.int32(1) if v.alive else np.int32(0)
         if v.alive:
             for q in range(3):

@@ -61,16 +61,29 @@ class Vertex(NamedTuple):
 
 
 @jit(inline="always")
-def shade_vertex(i, wray, tk, p, u1, u2, surf, lt, gs, ps, max_depth, rr_depth, nee,
-                 beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov, aov_open):
+def shade_vertex(hit, surf, lt, gs, ps, lim, beta, L, L_cam, depth, prev_pdf, prev_delta, gain, stream, aov,
+                 aov_open):
     """Shade the vertex of path slot i that its ray (direction wray) hit at distance tk, on triangle
-    p (< 0: escaped) at barycentrics u1, u2: emission (added to L, and L_cam at the first hit),
-    AOVs, the NEE sample, the continuation from the mixture and the roulette (the path state of
-    slot i updated). Returns a Vertex: the next ray and shadow ray to trace, and what a record of
-    the vertex takes. Arguments as the wavefront's `shade` (tracer.integrators.path); the callers
-    are that `shade`, the per-thread loop of tracer.integrators.thread_loop and the lanes' general
-    kernel (engine.general.shade_general) (at most 30 arguments: Python passes more
-    as *args, which Numba can neither inline nor call without copying every array)."""
+    p (< 0: escaped) at barycentrics u1, u2, given as hit = (i, wray's x, y, z, tk, p, u1, u2): emission
+    (added to L, and L_cam at the first hit), AOVs, the NEE sample, the continuation from the
+    mixture and the roulette (the path state of slot i updated). lim = (max_depth, rr_depth, nee);
+    stream = (key, pix), the paths' random keys and pixels (read only). Returns a Vertex: the next
+    ray and shadow ray to trace, and what a record of the vertex takes. The other arguments as the
+    wavefront's `shade` (tracer.integrators.path); the callers are that `shade`, the per-thread
+    loop of tracer.integrators.thread_loop and the lanes' general kernel
+    (engine.general.shade_general). Scalars travel in tuples, and the arrays the vertex writes one
+    by one: arrays written through a tuple lose Numba's writes (tests/test_seams.py)."""
+    i = hit[0]
+    wray = (hit[1], hit[2], hit[3])
+    tk = hit[4]
+    p = hit[5]
+    u1 = hit[6]
+    u2 = hit[7]
+    max_depth = lim[0]
+    rr_depth = lim[1]
+    nee = lim[2]
+    key = stream[0]
+    pix = stream[1]
     alive = False
     no = wray
     shadow = False

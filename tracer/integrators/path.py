@@ -143,9 +143,9 @@ def shade(active, ray_o, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
         i = active[k]
         if record != RECORD_NONE:
             r_strategy[rec_base + k] = -1
-        v = shade_vertex(i, (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2]), t[k], prim[k], b1[k], b2[k], surf, lt, gs, ps,
-                         max_depth, rr_depth, nee, beta, L, L_cam, depth, prev_pdf, prev_delta, gain, key, pix, aov,
-                         aov_open)
+        v = shade_vertex((i, ray_d[k, 0], ray_d[k, 1], ray_d[k, 2], t[k], prim[k], b1[k], b2[k]), surf, lt, gs, ps,
+                         (max_depth, rr_depth, nee), beta, L, L_cam, depth, prev_pdf, prev_delta, gain, (key, pix),
+                         aov, aov_open)
         alive[k] = v.alive
         has_shadow[k] = False
         if v.shadow:

@@ -210,9 +210,9 @@ def trace_paths(rtc, packet, ray_o, ray_d, surf, lt, gs, ps, limits, state, spli
             for k in range(LN):
                 known[k] = False
                 if lane[k] >= 0:
-                    v = shade_vertex(lane[k], (d[k, 0], d[k, 1], d[k, 2]), t[k], prim[k], b1[k], b2[k], surf, lt, gs,
-                                     ps, max_depth, rr_depth, nee, beta, L, L_cam, depth, prev_pdf, prev_delta,
-                                     gain, key, pix, aov, aov_open)
+                    v = shade_vertex((lane[k], d[k, 0], d[k, 1], d[k, 2], t[k], prim[k], b1[k], b2[k]), surf, lt,
+                                     gs, ps, (max_depth, rr_depth, nee), beta, L, L_cam, depth, prev_pdf,
+                                     prev_delta, gain, (key, pix), aov, aov_open)
                     alive[k] = v.alive
                     has_shadow[k] = v.shadow
                     for q in range(3):
