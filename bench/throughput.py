@@ -55,7 +55,7 @@ def scene_spec(name):
     return {"obj": name, "parts": None}
 
 
-def measure(path, accel, spp, max_depth, rr_depth, width, height, threads, repeat, path_loop="thread"):
+def measure(path, accel, spp, max_depth, rr_depth, width, height, threads, repeat, path_loop="lanes"):
     over = {}
     if width:
         over["width"] = width
@@ -104,7 +104,7 @@ class _Worker:
         self.proc.wait()
 
 
-def vs_mitsuba(names, spp, max_depth, rr_depth, threads, repeat, width=None, height=None, path_loops=("thread",)):
+def vs_mitsuba(names, spp, max_depth, rr_depth, threads, repeat, width=None, height=None, path_loops=("lanes",)):
     """Alternate our render (embree; one process per path loop) and Mitsuba's (its own process) on
     each scene; rows of Msamples/s, ours per path loop."""
     rows = []
@@ -198,7 +198,7 @@ def stage_table(rows):
     print("|---" * (4 + len(stages)) + "|")
     for r in rows:
         ms = r.get("msamples_per_s", r.get("ours"))
-        print(f"| {r['scene']} | {r.get('accel', 'embree')} | {r.get('path_loop', 'thread')} | {ms:.2f} | "
+        print(f"| {r['scene']} | {r.get('accel', 'embree')} | {r.get('path_loop', 'lanes')} | {ms:.2f} | "
               + " | ".join(f"{r['stages'].get(k, 0.0):.3f}" for k in stages) + " |")
 
 
@@ -212,7 +212,7 @@ def main(argv=None):
     p.add_argument("--width", type=int, default=None, help="default: the scene's (256 for the Cornell box)")
     p.add_argument("--height", type=int, default=None)
     p.add_argument("--threads", type=int, default=None)
-    p.add_argument("--path-loops", default="thread",
+    p.add_argument("--path-loops", default="lanes",
                    help="comma-separated: thread (per-thread loop), wave (wavefront), lanes (tracer.engine)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per scene and accel (best is reported)")
     p.add_argument("--json", default=None, help="write the records to this file (default: bench/results/"

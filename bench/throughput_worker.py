@@ -26,7 +26,7 @@ def _ours(job):
     over = {k: job[k] for k in ("width", "height") if job.get(k)}
     scene = tracer.load_scene(scene_spec(job["scene"])["obj"], **over)
     kw = dict(spp=job["spp"], max_depth=job["max_depth"], rr_depth=job["rr_depth"], threads=job.get("threads"),
-              path_loop=job.get("path_loop", "thread"))
+              path_loop=job.get("path_loop", "lanes"))
 
     def render(seed):
         st = tracer.render(scene, seed=seed, **kw).stats

@@ -42,7 +42,7 @@ def downsample(img, s):
     return img[: h * s, : w * s].reshape(h, s, w, s, -1).mean(axis=(1, 3))
 
 
-def measure(scene, ref, method, spp, seeds, train_spp, path_loop="thread"):
+def measure(scene, ref, method, spp, seeds, train_spp, path_loop="lanes"):
     """Per-seed (relative variance, render seconds per spp) of `method` (GUIDE[:K=V,...][/INTEGRATOR
     [:K=V,...]], bench.common.render_args) on `scene`, frozen after training if a guide."""
     args = render_args(method)
@@ -76,7 +76,7 @@ def main(argv=None):
     p.add_argument("--seeds", type=int, default=5)
     p.add_argument("--scale", type=int, default=2, help="render at 1/scale of the scene's resolution")
     p.add_argument("--scene-dir", default=None)
-    p.add_argument("--path-loop", default="thread", help="the frozen renders' path loop: thread or wave (render())")
+    p.add_argument("--path-loop", default="lanes", help="the frozen renders' path loop: lanes, thread or wave (render())")
     a = p.parse_args(argv)
     methods = [m.strip() for m in a.methods.split(";" if ";" in a.methods else ",") if m.strip()]
     base_method = next((m for m in methods if m.partition("/")[0] == "bsdf"), None)

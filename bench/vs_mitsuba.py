@@ -247,7 +247,7 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--seeds", type=int, default=4, help="renders per side (standard errors from their spread)")
     ap.add_argument("--out", help="write the table (markdown) here")
-    ap.add_argument("--path-loop", default="thread", help="our renders' path loop (render(path_loop=...))")
+    ap.add_argument("--path-loop", default="lanes", help="our renders' path loop (render(path_loop=...))")
     a = ap.parse_args(argv)
     paths = [p for name in a.scene for p in scene_paths(name)]
     if a.scene_dir:

@@ -67,10 +67,10 @@ def _parser():
     p.add_argument("--allow-missing", action="store_true",
                    help="render a Mitsuba scene XML whose meshes or textures are partly absent (warnings)")
     p.add_argument("--accel", default="embree", help=f"ray queries: {' or '.join(ACCELS)} (default embree)")
-    p.add_argument("--path-loop", default="thread", metavar="LOOP",
-                   help="thread (default: each thread's packets of paths to their end), wave (one kernel per stage) "
-                        "or lanes (float32 lanes, tracer.engine: every pass that records nothing, a guide's final "
-                        "passes included; its training passes run on thread)")
+    p.add_argument("--path-loop", metavar="LOOP",
+                   help="lanes (default: float32 lanes, tracer.engine, for every pass that records nothing, a "
+                        "guide's final passes included; its training passes run on the wavefront), thread (each "
+                        "thread's packets of paths to their end) or wave (one kernel per stage)")
     p.add_argument("--filter", default="box", help="pixel filter: box (default) or point (pixel centres)")
     p.add_argument("--crop", help="render only the window x0,y0,w,h of the image")
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
@@ -329,7 +329,7 @@ def _run(argv, warnings):
 
     if args.accel not in ACCELS:
         raise unknown_name("accel", args.accel, ACCELS)
-    if args.path_loop not in PATH_LOOPS:
+    if args.path_loop is not None and args.path_loop not in PATH_LOOPS:
         raise unknown_name("path loop", args.path_loop, PATH_LOOPS)
     # unknown names and settings fail here, before the scene loads
     guide_name, guide_settings = parse_spec(args.guide)

@@ -28,14 +28,14 @@ from .film import Film
 from .guiding import make_guide, warm_up_guides
 from .guiding.base import Guide
 from .integrators import make_integrator
-from .integrators.path import trace_wave
+from .integrators.path import engine, trace_wave
 from .methods import parse_spec
 from .lights import build_lights
 from .provenance import provenance
 from .result import RenderResult  # noqa: F401  (tracer.render.RenderResult)
 from .session import Session, Stop
 from .sources import CameraSource
-from .splitting import warm_up_splitting
+from .splitting import SplitPlan, warm_up_splitting
 from .wave import Stats, WaveBuffers
 
 DEFAULT_WAVE = 1 << 16
@@ -66,7 +66,7 @@ def _int_setting(name, value, lo):
 def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=None, seed=None,
            accel="embree", threads=None, wave_size=DEFAULT_WAVE, progress=False, callback=None,
            guide_settings=None, pixel_filter="box", crop=None, integrator="path", integrator_settings=None,
-           shift=None, recon=None, recon_alpha=None, shift_roughness=None, recon_settings=None, path_loop="thread",
+           shift=None, recon=None, recon_alpha=None, shift_roughness=None, recon_settings=None, path_loop=None,
            denoise=False, scheduler=None, workers=None, segments_dir=None):
     """Render `scene` (from tracer.load_scene) and return a RenderResult.
 
@@ -80,12 +80,16 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
                ...)) is accepted too, and can be inspected after.
     max_depth, rr_depth, seed: override the scene's render settings (Mitsuba conventions)
     accel      "embree" or "numba"; threads: worker threads (default: all cores)
-    path_loop  "thread" (default): passes that record and split nothing trace each thread's paths to
-               their end in packets of 16 (tracer.integrators.thread_loop; Embree only); "wave": every
-               pass runs the wavefront, one kernel per stage. The images are the same bit for bit.
-               "lanes": plain path tracing on float32 lanes (tracer.engine), where the scene allows
-               (diffuse materials, area lights); other scenes and passes take the per-thread loop.
-               Its images are equal in expectation, with other random numbers.
+    path_loop  "lanes" (the default, None: the same, without a warning where the accel is not Embree
+               and the wavefront runs instead): every pass that records nothing (a guide's final passes included)
+               runs on the float32 lanes of tracer.engine (Embree only): diffuse, textured diffuse,
+               plastic and metal vertices under triangle lights in class kernels, every other vertex
+               through the general one; a guide's training passes take the wavefront, a pss warp's
+               passes the per-thread loop. "thread": passes that record and split nothing trace each
+               thread's paths to their end in packets of 16 (tracer.integrators.thread_loop; Embree
+               only); "wave": every pass runs the wavefront, one kernel per stage. "thread" and "wave"
+               give the same image bit for bit; "lanes" one equal in expectation, with other random
+               numbers.
     denoise    True (or a quality: "high", the default, "balanced", "fast"): Intel Open Image Denoise
                on the final image with its albedo and normal (tracer.denoise; needs the `denoise`
                extra) into result.denoised; its time counts in time_total and in a time budget
@@ -242,6 +246,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     rs = scene.render
     max_depth, rr_depth, seed, crop = _path_settings(scene, max_depth, rr_depth, seed, pixel_filter, crop)
     wave_size = _int_setting("wave_size", wave_size, 1)
+    explicit = path_loop is not None
+    path_loop = "lanes" if path_loop is None else path_loop
     if path_loop not in PATH_LOOPS:
         raise unknown_name("path loop", path_loop, PATH_LOOPS)
     if time is None:
@@ -277,13 +283,18 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
     t_setup = _time.perf_counter() - t_start
     ctx = RenderContext(scene, acc, lights, seed, max_depth, rr_depth, pixel_filter, crop, integ.nee)
     ctx.path_loop = path_loop
-    if path_loop == "lanes" and (gaps := engine_gaps(acc.name)):
+    if explicit and path_loop == "lanes" and (gaps := engine_gaps(acc.name)):
         log.warning("path_loop lanes: not with %s; the render runs on the other path loops", ", ".join(gaps))
+    lane_kernels = None
+    if path_loop == "lanes" and engine is not None and acc.name == "embree":
+        t_lanes = _time.perf_counter()
+        lane_kernels = engine.class_kernels(ctx, g is not None)  # makes the lanes' scene tables: set-up time
+        t_setup += _time.perf_counter() - t_lanes
     # Trace throwaway paths first: they compile the kernels the render will run (or load them from
     # the cache), so that neither the time budget nor the stats count Numba's compile. Recorded
-    # paths (a guide's training) run the wavefront, the rest the per-thread loop; a render that
-    # runs neither (gpt's hybrid shift without a guide) compiles neither.
-    kernels = compile_plan(g is not None, integ, acc.name, path_loop)
+    # paths (a guide's training) run the wavefront, the rest the lanes (or the loop path_loop
+    # names); a render that runs neither (gpt's hybrid shift without a guide) compiles neither.
+    kernels = compile_plan(g is not None, integ, acc.name, path_loop, lane_kernels)
     if not _jit.kernels_cached(*kernels):
         log.warning(COMPILE_NOTE, extra={"compile_notice": True})
     t0 = _time.perf_counter()
@@ -375,8 +386,12 @@ def _warm_up(ctx, g, splits, integ, kernels, crop):
     if g is not None:
         trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats(),
                    observe=lambda rec: None)
-    if g is not None or "thread_loop.trace_paths" in kernels or "path.shade" in kernels:
+    lanes = "lanes.classify" in kernels
+    if g is not None or lanes or "thread_loop.trace_paths" in kernels or "path.shade" in kernels:
         trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats())
+    if lanes:
+        engine.warm_up(ctx, WaveBuffers(1, split=splits), kernels,
+                       SplitPlan(1.0, np.zeros(1), np.ones(1), 1.0, 0.1) if splits else None)
     if g is not None:
         warm_up_guides(ctx)
         g.warm_up(ctx)
@@ -392,17 +407,25 @@ def engine_gaps(accel):
     return [f"the {accel} accel (the lanes need Embree)"] if accel != "embree" else []
 
 
-def compile_plan(guided, integ, accel, path_loop="thread"):
-    """The kernels ("module.function") a render's warm-up compiles: the integrator's, the
-    wavefront's where a guide records paths or the per-thread loop cannot run (another accel,
-    path_loop="wave"), and the guides' photon tracer. What _jit.kernels_cached checks before a
-    render, to say that a compile is coming."""
+def compile_plan(guided, integ, accel, path_loop="lanes", lane_kernels=None):
+    """The kernels ("module.function") a render's warm-up compiles: the integrator's, the lanes'
+    in place of the per-thread loop under path_loop "lanes" (lane_kernels: the scene's,
+    engine.lanes.class_kernels; None: a guess without the scene), the wavefront's where a guide
+    records paths or neither loop can run (another accel, path_loop="wave"), and the guides'
+    photon tracer. What _jit.kernels_cached checks before a render, to say that a compile is
+    coming."""
+    path_loop = path_loop or "lanes"
     names = list(integ.kernels())
-    if path_loop == "lanes" and "thread_loop.trace_paths" in names and accel == "embree":
-        names += ["lanes.shade", "glossy.shade_glossy", "general.shade_general"]
-    if guided or (("thread_loop.trace_paths" in names) and (accel != "embree" or path_loop == "wave")):
-        names = [n for n in names if n != "thread_loop.trace_paths"] + ["path.shade"]
-        if guided and accel == "embree" and path_loop != "wave":
+    plain = "thread_loop.trace_paths" in names  # the path tracer's passes
+    lanes = plain and path_loop == "lanes" and accel == "embree"
+    if guided or lanes or (plain and (accel != "embree" or path_loop == "wave")):
+        names = [n for n in names if n != "thread_loop.trace_paths"]
+        if lanes:
+            names += (list(lane_kernels) if lane_kernels is not None else
+                      ["lanes.classify"] + (["general.shade_general"] if guided else []))
+        if guided or not lanes:
+            names.append("path.shade")
+        if guided and accel == "embree" and path_loop == "thread":
             names.append("thread_loop.trace_paths")
         if guided:
             names.append("photons.scatter")

@@ -60,6 +60,13 @@ def offset_point(x, ng, w, eps):
     return (x[0] + s * ng[0], x[1] + s * ng[1], x[2] + s * ng[2])
 
 
+# A shadow ray to a point of a light ends this fraction of its length short of it (pbrt-v4's
+# ShadowEpsilon). The light's own offset (ray_offsets) covers the rounding of its triangle, not
+# Embree's float32 distance along a long ray, which errs by more: 1000 units from a small light, the
+# ray hit the light itself (a 2000-unit floor lit at grazing angles in veach-mis came out 20% dark).
+SHADOW_EPSILON = 1e-4
+
+
 @jit(inline="always")
 def shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps):
     """(origin, unit direction, tmax) of the shadow ray from x (normal ng, offset eps) toward the
@@ -67,8 +74,9 @@ def shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps):
     light: at infinity, tmax inf; a point or spot light: tmax the distance to it from the offset
     origin).
     Both ends are offset by their own triangle's ray_offsets, the light's end along its normal
-    toward x (pbrt-v4's SpawnRayTo), so the ray stops short of the light's plane as Embree sees it.
-    tmax <= 0 means there is no room for a ray (x on the light)."""
+    toward x (pbrt-v4's SpawnRayTo), and tmax is SHADOW_EPSILON of the length short of that end, so
+    the ray stops short of the light's plane as Embree sees it. tmax <= 0 means there is no room
+    for a ray (x on the light)."""
     o = offset_point(x, ng, wl, eps)
     y = (x[0] + dist * wl[0], x[1] + dist * wl[1], x[2] + dist * wl[2])  # a point or spot light
     if lt_tri >= 0:
@@ -82,7 +90,7 @@ def shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps):
     if not tmax > 0.0:
         return o, wl, 0.0
     inv = 1.0 / tmax
-    return o, (d[0] * inv, d[1] * inv, d[2] * inv), tmax
+    return o, (d[0] * inv, d[1] * inv, d[2] * inv), tmax * (1.0 - SHADOW_EPSILON)
 
 
 @jit(inline="always")

@@ -296,7 +296,8 @@ def test_a_reused_initial_pass_is_the_bsdf_render_of_its_samples(max_depth):
     assert_clean(r)
     assert g.stats()["initial_reused"] and g.stats()["fallback"] is None
     kept = []
-    tracer.render(scene, spp=2, seed=9, max_depth=max_depth, callback=lambda i, film, st: kept.append(film.sum.copy()))
+    tracer.render(scene, spp=2, seed=9, max_depth=max_depth, path_loop="thread",  # the initial pass's streams
+                  callback=lambda i, film, st: kept.append(film.sum.copy()))
     np.testing.assert_array_equal(seen[0][0], kept[-1])
     assert (seen[0][1] == 2).all()
     passes = r.stats["passes"]

@@ -24,11 +24,13 @@ from numba import prange
 from .._jit import jit, kernel
 from ..bsdfs import COATED, ONE_SIDED, _coated_eval_pdf, _coated_sample, _metal_eval_pdf, _metal_f, _metal_sample
 from ..sampling import dot, frame, to_local, to_world
+from ..material import _unit_toward
 from ..shading import offset_point
 from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, G_N, G_VN, KEY, L_LIGHTS, L_MAX, L_NEE, L_RR,
                    L_SMOOTH, OX, OY, OZ, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SLOT, SOX, SOY, SOZ, SR, TL_AREA,
                    TL_EMIT, TL_EPS, TL_SEL, TMAX)
-from .sampling32 import BLOCK, BOUNCE, D_DIR, D_LIGHT, D_LOBE, D_POS, D_RR, RR_MAX, SHORT, rand32
+from .sampling32 import (BLOCK, BOUNCE, D_COIN, D_DIR, D_LIGHT, D_LOBE, D_POS, D_RR, RR_MAX, SHORT, alias_column, hash32,
+                         rand32)
 from .vertex import MAX_BOUNCES
 
 
@@ -42,29 +44,23 @@ def corner_normal(geo, p, b1, b2):
          b0 * geo[G_VN + 1, p] + b1 * geo[G_VN + 4, p] + b2 * geo[G_VN + 7, p],
          b0 * geo[G_VN + 2, p] + b1 * geo[G_VN + 5, p] + b2 * geo[G_VN + 8, p])
     ng = (np.float64(geo[G_N, p]), np.float64(geo[G_N + 1, p]), np.float64(geo[G_N + 2, p]))
-    c2 = dot(n, n)
-    if not (c2 > 0.0 and math.isfinite(c2)):
-        return ng
-    r = 1.0 / math.sqrt(c2)
-    if dot(n, ng) < 0.0:
-        r = -r
-    return (n[0] * r, n[1] * r, n[2] * r)
+    return _unit_toward(n, ng, ng)
 
 
 @kernel
-def shade_glossy(lf, li, hit, prim, sh, flags, glossy, geo, tl, kd, alias_p, alias_i, lim, surf, state):
+def shade_glossy(lf, li, hit, prim, sh, flags, glossy, geo, tl, kd, alias_t, alias_i, lim, surf, state):
     """Shade the vertex of each lane glossy[0 ..] (classify's list; its triangle's material, COATED
     or METAL, from the material.Surfaces `surf`, its parameters with the colour kd[:, lane] in
     place of its reflectance (COATED) or specular reflectance (METAL)): the AOV
     albedo into the wave's PathState `state` where aov_open, the NEE sample into the shadow rows
     (flags[SHADOW]), the sampled next ray, throughput, density, delta flag and depth into the lane,
-    the roulette into flags[ALIVE]. The scene's rows (geo, tl, alias_p, alias_i) and lim as
+    the roulette into flags[ALIVE]. The scene's rows (geo, tl, alias_t, alias_i) and lim as
     lanes.shade takes them."""
     rr_depth = lim[L_RR]
     max_depth = lim[L_MAX]
     nee = lim[L_NEE] != 0
     smooth = lim[L_SMOOTH] != 0
-    nl = alias_p.shape[0]
+    nl = alias_t.shape[0]
     lights = lim[L_LIGHTS] > 0
     aov = state.aov
     aov_open = state.aov_open
@@ -113,9 +109,8 @@ def shade_glossy(lf, li, hit, prim, sh, flags, glossy, geo, tl, kd, alias_p, ali
         # against the coat's own density of that direction
         shadow = False
         if on and nee and lights and not smooth_metal:
-            us = np.float64(rand32(key, base + D_LIGHT)) * nl
-            c = min(int(us), nl - 1)
-            lj = alias_i[0, c] if us - c < alias_p[c] else alias_i[1, c]
+            c = alias_column(key, base + D_LIGHT, nl)
+            lj = alias_i[0, c] if hash32(key, base + D_COIN) < alias_t[c] else alias_i[1, c]
             su = math.sqrt(np.float64(rand32(key, base + D_POS)))
             lb1 = 1.0 - su
             lb2 = np.float64(rand32(key, base + D_POS + 1)) * su
@@ -134,15 +129,21 @@ def shade_glossy(lf, li, hit, prim, sh, flags, glossy, geo, tl, kd, alias_p, ali
                     leak = smooth and ((wo[2] * wil[2] > 0.0) != (cos_o * dot(wl, ng) > 0.0))
                     g = pls / (pls * pls + pb * pb)  # the power heuristic's weight over pls
                     if not leak and pls > 0.0 and (f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0):
+                        # from the offset origin to the light point pushed off its triangle, toward x,
+                        # by the light's own offset (as shading.shadow_ray)
                         so = offset_point(x, ng, wl, eps)
-                        shadow = True
+                        el = np.float64(tl[TL_EPS, lj])
+                        e = (x[0] + w[0] + el * geo[G_N, lj] - so[0], x[1] + w[1] + el * geo[G_N + 1, lj] - so[1],
+                             x[2] + w[2] + el * geo[G_N + 2, lj] - so[2])
+                        te = math.sqrt(dot(e, e))
+                        shadow = te > 0.0
                         sh[SOX, k] = so[0]
                         sh[SOY, k] = so[1]
                         sh[SOZ, k] = so[2]
-                        sh[SDX, k] = wl[0]
-                        sh[SDY, k] = wl[1]
-                        sh[SDZ, k] = wl[2]
-                        sh[TMAX, k] = dist * SHORT
+                        sh[SDX, k] = e[0] / te if shadow else wl[0]
+                        sh[SDY, k] = e[1] / te if shadow else wl[1]
+                        sh[SDZ, k] = e[2] / te if shadow else wl[2]
+                        sh[TMAX, k] = te * SHORT
                         sh[SR, k] = beta[0] * f[0] * tl[TL_EMIT, lj] * g
                         sh[SG, k] = beta[1] * f[1] * tl[TL_EMIT + 1, lj] * g
                         sh[SB, k] = beta[2] * f[2] * tl[TL_EMIT + 2, lj] * g

@@ -49,6 +49,7 @@ from ..bsdfs import COATED, DIFFUSE, METAL, ONE_SIDED, P_CLEAR, P_FLAGS, P_KD, P
 from ..bvh.embree import _INTERSECT16, _LANES, _OCCLUDED16, _VALID, call4
 from ..bvh.numba_bvh import _NumbaThreads
 from ..lights import ENV_NONE
+from ..rng import no_primary_samples
 from ..material import TEX_BITMAP, TEX_CONSTANT, TEX_SLOT_BUMP, TEX_SLOT_KD, TEX_SLOT_KS, TEX_SLOT_OPACITY
 from ..splitting import make_copy, merge_copies, split_count
 from ..wave import TRACE_PARTS
@@ -58,8 +59,8 @@ from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, FLAG_ROWS, FLOAT
                    INT_ROWS, KEY, LB, LG, LR, L_LIGHTS, L_MAX, L_NEE, L_RR, OX, OY, OZ, PAD, PDF, SB, SDX, SDY, SDZ, SG,
                    SHADOW, SHADOW_ROWS, SLOT, SOX, SOY, SOZ, SR, TL_AREA, TL_EMIT, TL_EPS, TL_FAST, TL_KD, TL_ONE_SIDED,
                    TL_ROWS, TL_SEL, TL_TEX, TMAX, _rows)
-from .sampling32 import (BIG, BLOCK, BOUNCE, D_DIR, D_LIGHT, D_POS, D_RR, F, HALF, INV_PI, ONE, RR_MAX, SHORT, TINY,
-                         ZERO, floor32, rand32, sincos2pi)
+from .sampling32 import (BIG, BLOCK, BOUNCE, D_COIN, D_DIR, D_LIGHT, D_POS, D_RR, F, HALF, INV_PI, ONE, RR_MAX,
+                         SHORT, TINY, ZERO, alias_column, alias_thresholds, floor32, hash32, rand32, sincos2pi)
 from .vertex import MAX_BOUNCES
 
 _CHUNKS = 64  # compaction: chunks counted, then written at their offsets
@@ -105,9 +106,9 @@ class LaneScene:
     textures the classes read: tinfo (T, 16)
     float32 the rows of tracer.material's texture table, tint (T, 3) int32 their texel offset,
     width and height, tdata the texels (one constant row when the scene has none); the alias table
-    over the emissive triangles (alias_p: the probability of keeping column j; alias_i (2,
-    columns): column j's triangle and its alias's); escape_fast: an escaped path ends with nothing
-    to add (no environment)."""
+    over the emissive triangles (alias_t: column j keeps its own triangle where a 32-bit hash is
+    below alias_t[j], sampling32.alias_thresholds; alias_i (2, columns): column j's triangle and
+    its alias's); escape_fast: an escaped path ends with nothing to add (no environment)."""
 
     def __init__(self, scene, surf, lt, centre):
         v = surf.tri - centre
@@ -139,6 +140,7 @@ class LaneScene:
             self.tdata = np.zeros(3, F)
         self.escape_fast = lt.env_type == ENV_NONE
         self.all_fast = bool(np.all(fast == DIFFUSE_CLASS)) and self.escape_fast  # every vertex the fast kernel's
+        self.classes = frozenset(int(c) for c in np.unique(fast))  # the classes of the scene's triangles
         self.smooth = surf.vn.shape[0] > 0
         e = lt.tri
         sel = (1.0 - lt.p_env) * np.diff(lt.cdf)
@@ -148,10 +150,10 @@ class LaneScene:
         self.n_lights = int(e.shape[0])
         if self.n_lights:
             prob, alias = alias_table(sel / sel.sum())
-            self.alias_p = prob.astype(F)
+            self.alias_t = alias_thresholds(prob)
             self.alias_i = np.stack([e, e[alias]]).astype(np.int32)
         else:
-            self.alias_p = np.zeros(1, F)
+            self.alias_t = np.zeros(1, np.uint32)
             self.alias_i = np.zeros((2, 1), np.int32)
 
 
@@ -228,6 +230,53 @@ def usable(ctx, record, ps):
     if ctx.path_loop != "lanes" or ctx.accel.name != "embree" or record:
         return False
     return ps is None or not np.any(ps.col >= 0)
+
+
+def class_kernels(ctx, guided):
+    """The shading kernels ("module.function") a render of ctx's scene may run on the lanes:
+    `lanes.shade` where a vertex or an escape may be of the diffuse class, `glossy.shade_glossy`
+    where a triangle is glossy, `general.shade_general` where one is general, an environment or a
+    point light lights the scene (every vertex general), or under a guide (whose maps make every
+    vertex general); `lanes.classify` always."""
+    ls = _lane_scene(ctx)
+    names = ["lanes.classify"]
+    if ls.escape_fast or DIFFUSE_CLASS in ls.classes:
+        names.append("lanes.shade")
+    if GLOSSY_CLASS in ls.classes:
+        names.append("glossy.shade_glossy")
+    if guided or GENERAL in ls.classes or not ls.escape_fast:
+        names.append("general.shade_general")
+    return names
+
+
+def warm_up(ctx, buf, names, split=None):
+    """Compile (or load from the cache) the shading kernels among `names` (class_kernels') and,
+    given a splitting.SplitPlan, split_lanes, each run on zero lanes with the argument types of
+    run()'s calls (buf: a wave.WaveBuffers, made with split=True for split), so that none compiles
+    inside a render's passes and its time budget."""
+    ls = _lane_scene(ctx)
+    lanes = LaneBuffers(buf.capacity)
+    lf, li, flags = lanes.f, lanes.i, lanes.flags
+    lim = np.array([ctx.rr_depth, ctx.max_depth, int(ctx.nee), ls.n_lights, int(ls.smooth)], np.int32)
+    state = buf.path_state(0)
+    if "lanes.shade" in names:
+        if ls.textured:
+            reflectance(0, lanes.hit, lanes.prim, lanes.fast, ls.geo, ls.tl, ls.tinfo, ls.tint, ls.tdata, lanes.kd)
+        else:
+            flat_reflectance(0, lanes.prim, lanes.fast, ls.tl, lanes.kd)
+        shade(lf, li, 0, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.tl, lanes.kd, ls.alias_t,
+              ls.alias_i, lim)
+        albedo_aov(li, 0, lanes.kd, lanes.prim, lanes.fast, state)
+    if "glossy.shade_glossy" in names:
+        shade_glossy(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :0], ls.geo, ls.tl, lanes.kd,
+                     ls.alias_t, ls.alias_i, lim, ctx.surfaces, state)
+    if "general.shade_general" in names:
+        shade_general(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[0, :0], ctx.accel.centre,
+                      ctx.surfaces, ctx.lights, ctx.guide_state, no_primary_samples(),
+                      (ctx.max_depth, ctx.rr_depth, ctx.nee), state)
+    if split is not None:
+        split_lanes(lf, li, 0, lanes.hit, lanes.prim, ctx.surfaces.tri, ctx.tri_normal, state, ctx.guide_state, split,
+                    lanes.ks, buf.parent, 0, buf.capacity)
 
 
 def fast_allowed(gs):
@@ -586,7 +635,7 @@ def reflectance(n, hit, prim, fast_lane, geo, tl, tinfo, tint, tdata, kd):
 
 
 @kernel(fastmath={"arcp", "contract", "nsz"})
-def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_p, alias_i, lim):
+def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_t, alias_i, lim):
     """Shade the vertex each lane 0 .. n-1 of the fast class (fast_lane) hit (prim -1: escaped, the
     path ends): emission with its MIS weight (full without NEE or after a delta bounce) into the
     lane's radiance; with NEE (lim[L_NEE]) a light sample with MIS into the shadow rows
@@ -603,7 +652,7 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_p, alia
     max_depth = lim[L_MAX]
     nee = lim[L_NEE] != 0
     n_lights = lim[L_LIGHTS]
-    nl = alias_p.shape[0]
+    nl = alias_t.shape[0]
     for k in prange(n):
         fast = fast_lane[k] == DIFFUSE_CLASS
         p = prim[k]
@@ -656,15 +705,15 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_p, alia
         lf[LB, k] += bb * tl[TL_EMIT + 2, pc] * w_e
 
         # a light sample: an emissive triangle from the alias table, a point uniform on it
-        us = rand32(key, base + D_LIGHT) * F(nl)
-        j = min(np.int32(us), np.int32(nl - 1))
-        lj = alias_i[0, j] if us - F(j) < alias_p[j] else alias_i[1, j]
+        j = alias_column(key, base + D_LIGHT, nl)
+        lj = alias_i[0, j] if hash32(key, base + D_COIN) < alias_t[j] else alias_i[1, j]
         su = math.sqrt(rand32(key, base + D_POS))
         lb1 = ONE - su
         lb2 = rand32(key, base + D_POS + 1) * su
-        wx = geo[0, lj] + lb1 * geo[3, lj] + lb2 * geo[6, lj] - x0
-        wy = geo[1, lj] + lb1 * geo[4, lj] + lb2 * geo[7, lj] - x1
-        wz = geo[2, lj] + lb1 * geo[5, lj] + lb2 * geo[8, lj] - x2
+        lx0 = geo[0, lj] + lb1 * geo[3, lj] + lb2 * geo[6, lj]  # the light point
+        lx1 = geo[1, lj] + lb1 * geo[4, lj] + lb2 * geo[7, lj]
+        lx2 = geo[2, lj] + lb1 * geo[5, lj] + lb2 * geo[8, lj]
+        wx, wy, wz = lx0 - x0, lx1 - x1, lx2 - x2
         d2 = max(wx * wx + wy * wy + wz * wz, TINY)
         inv_d = ONE / math.sqrt(d2)
         wx, wy, wz = wx * inv_d, wy * inv_d, wz * inv_d
@@ -677,12 +726,20 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_p, alia
         g = (pb * pls / max(pls * pls + pb * pb, TINY)) if ok else ZERO  # f cos / p_light x the power heuristic
         eps = tl[TL_EPS, pc]
         ox, oy, oz = x0 + fx * eps, x1 + fy * eps, x2 + fz * eps
+        # the shadow ray: from the offset origin to the light point pushed off its triangle, toward
+        # x, by the light's own offset (as shading.shadow_ray)
+        el = tl[TL_EPS, lj]
+        ex = lx0 + el * geo[G_N, lj] - ox
+        ey = lx1 + el * geo[G_N + 1, lj] - oy
+        ez = lx2 + el * geo[G_N + 2, lj] - oz
+        e2 = max(ex * ex + ey * ey + ez * ez, TINY)
+        inv_e = ONE / math.sqrt(e2)
         sr = br * ar * tl[TL_EMIT, lj] * g
         sg = bg * ag * tl[TL_EMIT + 1, lj] * g
         sb = bb * ab * tl[TL_EMIT + 2, lj] * g
         sh[SOX, k], sh[SOY, k], sh[SOZ, k] = ox, oy, oz
-        sh[SDX, k], sh[SDY, k], sh[SDZ, k] = wx, wy, wz
-        sh[TMAX, k] = d2 * inv_d * SHORT
+        sh[SDX, k], sh[SDY, k], sh[SDZ, k] = ex * inv_e, ey * inv_e, ez * inv_e
+        sh[TMAX, k] = e2 * inv_e * SHORT
         sh[SR, k], sh[SG, k], sh[SB, k] = sr, sg, sb
         flags[SHADOW, k] = np.int32(1) if (sr + sg + sb) > ZERO else np.int32(0)
 
@@ -874,10 +931,10 @@ def run(ctx, buf, n, ps, stats, split=None):
                 else:
                     flat_reflectance(m, lanes.prim, lanes.fast, ls.tl, lanes.kd)
                 shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.tl, lanes.kd,
-                      ls.alias_p, ls.alias_i, lim)
+                      ls.alias_t, ls.alias_i, lim)
                 if nc:
                     shade_glossy(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :nc], ls.geo, ls.tl,
-                                 lanes.kd, ls.alias_p, ls.alias_i, lim, surf, state)
+                                 lanes.kd, ls.alias_t, ls.alias_i, lim, surf, state)
                     glossy += nc
                 if classified:
                     albedo_aov(li, m, lanes.kd, lanes.prim, lanes.fast, state)

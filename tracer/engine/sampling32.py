@@ -25,21 +25,41 @@ S3, S5, S7, S9, S11 = (F(-1.0 / 6.0), F(1.0 / 120.0), F(-1.0 / 5040.0), F(1.0 / 
 C2, C4, C6, C8, C10 = (F(-0.5), F(1.0 / 24.0), F(-1.0 / 720.0), F(1.0 / 40320.0), F(-1.0 / 3628800.0))
 _GOLDEN32, _FM1, _FM2 = U32(0x9E3779B9), U32(0x85EBCA6B), U32(0xC2B2AE35)
 _S16, _S13, _S8 = U32(16), U32(13), U32(8)
-# tracer.rng's dimensions of bounce k: BOUNCE + BLOCK k + slot (direction 0, 1; lobe 2; light 4; its point 5, 6;
-# roulette 7)
+# tracer.rng's dimensions of bounce k: BOUNCE + BLOCK k + slot (direction 0, 1; lobe 2; the light's alias coin 3;
+# the light's column 4; its point 5, 6; roulette 7)
 BOUNCE, BLOCK = 2, 8
-D_DIR, D_LOBE, D_LIGHT, D_POS, D_RR = 0, 2, 4, 5, 7
+D_DIR, D_LOBE, D_COIN, D_LIGHT, D_POS, D_RR = 0, 2, 3, 4, 5, 7
+TWO32 = 2.0 ** 32
+
+
+@jit(inline="always")
+def hash32(key, dim):
+    """uint32: MurmurHash3's finaliser of key + (dim + 1) x golden (SplitMix's sequence in 32 bits),
+    every integer kept 32-bit so that LLVM packs 8 or 16 lanes."""
+    x = U32(U32(key) + U32(U32(dim + 1) * _GOLDEN32))
+    x = U32(U32(x ^ (x >> _S16)) * _FM1)
+    x = U32(U32(x ^ (x >> _S13)) * _FM2)
+    return U32(x ^ (x >> _S16))
 
 
 @jit(inline="always")
 def rand32(key, dim):
-    """float32 in [0, 1): the top 24 bits of MurmurHash3's finaliser of key + (dim + 1) x golden
-    (SplitMix's sequence in 32 bits), every integer kept 32-bit so that LLVM packs 8 or 16 lanes."""
-    x = U32(U32(key) + U32(U32(dim + 1) * _GOLDEN32))
-    x = U32(U32(x ^ (x >> _S16)) * _FM1)
-    x = U32(U32(x ^ (x >> _S13)) * _FM2)
-    x = U32(x ^ (x >> _S16))
-    return F(np.int32(x >> _S8)) * INV24
+    """float32 in [0, 1): the top 24 bits of hash32(key, dim)."""
+    return F(np.int32(hash32(key, dim) >> _S8)) * INV24
+
+
+@jit(inline="always")
+def alias_column(key, dim, n):
+    """A column 0 .. n-1 of an alias table: the high half of hash32(key, dim) x n, each column's
+    probability 1/n to within 1/2^32 (a float32 uniform times n would leave the coin a resolution
+    of n/2^24)."""
+    return np.int32((np.uint64(hash32(key, dim)) * np.uint64(n)) >> np.uint64(32))
+
+
+def alias_thresholds(prob):
+    """An alias table's keep probabilities as uint32 thresholds for hash32: keep column j when
+    hash32 < t[j], exact to 1/2^32."""
+    return np.minimum(np.round(np.asarray(prob, np.float64) * TWO32), TWO32 - 1.0).astype(np.uint32)
 
 
 @jit(inline="always")

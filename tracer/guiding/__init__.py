@@ -89,6 +89,11 @@ def warm_up_guides(ctx):
     f32 = np.zeros(1, np.float32)
     _mix_moments(np.zeros(1, np.int32), np.zeros(1, np.int8), f32, f32, f32, False, f32, f32, f32, np.ones(1),
                  np.ones(1), np.zeros((1, 1)), np.zeros(1))
+    # the pilot's median splits: four points in one visited leaf, over a threshold of one
+    grid = HierarchicalGrid(np.zeros(3), np.ones(3), 2, 2, 2, 6)
+    points, normals = np.full((4, 3), 0.3), np.tile(np.array([0.0, 0.0, 1.0]), (4, 1))
+    grid.visit(grid.locate(points, normals), 0)
+    grid.split_median(points, 1.0, 2, normals)
 
 
 class FrozenGuide(Guide):

@@ -390,6 +390,7 @@ class HierarchicalGrid:
         marks entries to skip (none by default)."""
         if strategy is None:
             strategy = np.zeros(len(nodes), np.int8)
+        nodes = np.asarray(nodes, np.int32)  # as records hold them: one compiled signature
         _splat_records(nodes, strategy, wi, n, pdf, radiance, self.n_theta, self.n_phi, self.data_slot, self.power,
                        self.count, self.node_count)
 

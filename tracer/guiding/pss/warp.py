@@ -237,6 +237,7 @@ class PSSGuide(Guide):
         dims = pss_dims(1)
         src = PrimarySampleSource(np.full((1, dims.shape[0]), 0.5), dims, whole_image=True)
         trace_source(ctx, src, Film(int(ctx.crop[2]), int(ctx.crop[3])))
+        uniform_batch(int(ctx.seed), np.zeros(1, np.int64), np.zeros(1, np.int64), dims)  # the latents' kernel
 
     # the render's passes
     def schedule(self, session):
@@ -247,13 +248,19 @@ class PSSGuide(Guide):
         session.films.append((film, "train"))
         session.phase("candidates")
         sample0 = session.sample0
-        if session.time is None:
-            session.run_pass(film, n_c, "train")
-        else:  # 1 spp at a time, while within half the learning share of the budget
-            for _ in range(n_c):
-                session.run_pass(film, 1, "train")
-                if session.elapsed() > 0.5 * self.share * session.time:
-                    break
+        # examples() pairs each candidate's value with its primary sample as tracer.rng draws it, so
+        # the candidates take a loop that draws tracer.rng's numbers (the lanes draw their own)
+        loop, ctx.path_loop = ctx.path_loop, ("thread" if ctx.path_loop == "lanes" else ctx.path_loop)
+        try:
+            if session.time is None:
+                session.run_pass(film, n_c, "train")
+            else:  # 1 spp at a time, while within half the learning share of the budget
+                for _ in range(n_c):
+                    session.run_pass(film, 1, "train")
+                    if session.elapsed() > 0.5 * self.share * session.time:
+                        break
+        finally:
+            ctx.path_loop = loop
         t0 = _time.perf_counter()
         if session.time is not None:
             seconds = self.share * session.time - session.elapsed()
