@@ -371,7 +371,8 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
 
 
 COMPILE_NOTE = ("compiling the kernels this render runs, once per install or update of the tracer (on a 2-core VM: "
-                "about 4.5 min for the path tracer, 8.5 with a guide, 8 for gpt) ...")
+                "about 0.5 min for the path tracer, 2 where a material or light needs the lanes' general kernel, "
+                "4.5 with a guide, 8 for gpt) ...")
 
 
 def _reserve_text(integrator, solve, den):
