@@ -35,7 +35,7 @@ from .provenance import provenance
 from .result import RenderResult  # noqa: F401  (tracer.render.RenderResult)
 from .session import Session, Stop
 from .sources import CameraSource
-from .splitting import SplitPlan, warm_up_splitting
+from .splitting import warm_up_plan, warm_up_splitting
 from .wave import Stats, WaveBuffers
 
 DEFAULT_WAVE = 1 << 16
@@ -391,8 +391,7 @@ def _warm_up(ctx, g, splits, integ, kernels, crop):
     if g is not None or lanes or "thread_loop.trace_paths" in kernels or "path.shade" in kernels:
         trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats())
     if lanes:
-        engine.warm_up(ctx, WaveBuffers(1, split=splits), kernels,
-                       SplitPlan(1.0, np.zeros(1), np.ones(1), 1.0, 0.1) if splits else None)
+        engine.warm_up(ctx, WaveBuffers(1, split=splits), kernels, warm_up_plan() if splits else None)
     if g is not None:
         warm_up_guides(ctx)
         g.warm_up(ctx)

@@ -342,6 +342,11 @@ def split_wave(buf, active, n_active, n_slots, hits, rd, ctx, plan, stats):
     return n_e, n_s, tuple(a[:n_e] for a in hit2)
 
 
+def warm_up_plan():
+    """A SplitPlan that splits and plays the window: the types every plan has, for warm-ups."""
+    return SplitPlan(1.0, np.zeros(1), np.ones(1), 1.0, 0.1)
+
+
 def warm_up_splitting(ctx):
     """Compile (or load from the cache) the splitting kernels on a tiny wave of ctx's scene."""
     from .wave import WaveBuffers
@@ -350,7 +355,7 @@ def warm_up_splitting(ctx):
     ks = buf.ks[:1]
     e = (np.zeros(1), np.full(1, -1, np.int32), np.zeros(1), np.zeros(1))
     split_counts(buf.active[:1], buf.ray_d[:1], e, ctx.scene.tri, ctx.tri_normal, buf.path_state(), ctx.guide_state,
-                 SplitPlan(1.0, np.zeros(1), np.ones(1), 1.0, 0.1), ks)
+                 warm_up_plan(), ks)
     split_paths(buf.active, ks, e, e, buf.ray_o, buf.ray_d, buf.path_state(), buf.parent, 1, buf.capacity)
     merge_copies(buf.L, buf.parent, 1, 1)
     _outgoing_stats(np.zeros(1, np.int32), np.zeros(1, np.int8), np.zeros(1, np.int64), np.zeros(1, np.float32),
