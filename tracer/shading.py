@@ -158,22 +158,22 @@ def mixture_pdf(gs, slot, a, pb, wiw):
 
 
 @jit(inline="always")
-def next_event(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1, table):
+def next_event(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u, table):
     """Next-event estimation at a non-delta vertex x (Surface sf, geometric normal ng, outgoing wo
-    local), path throughput beta: one light sample (u_light, u_pos0, u_pos1), MIS-weighted by
+    local), path throughput beta: one light sample (u = (u_light, u_pos0, u_pos1)), MIS-weighted by
     the power heuristic against the mixture density of the same direction. Returns (ok, origin,
     unit direction, tmax, contribution beta f le w / p_light): the shadow ray to trace, and what it
     adds if unblocked. ok is False where nothing is to be traced."""
-    ls = light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1, table)
+    ls = light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u, table)
     return ls.ok, ls.origin, ls.direction, ls.tmax, ls.contrib
 
 
 @jit(inline="always")
-def light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u_light, u_pos0, u_pos1, table):
+def light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_eps, u, table):
     """next_event with the light sample itself, as a LightSample. The gradient-domain tracer shifts
     this sample to its offset paths. A delta light's sample (lt_tri < lights.LIGHT_ENV) has MIS weight 1
     and mixture density 0: no direction the path samples reaches it."""
-    wl, dist, le, pl, lt_tri = sample_light(lt, tri, x, u_light, u_pos0, u_pos1)
+    wl, dist, le, pl, lt_tri = sample_light(lt, tri, x, u[0], u[1], u[2])
     ok = False
     so = x
     sd = wl

@@ -51,9 +51,15 @@ WINDOW_AUTO = {True: 0.0, False: 3.0}  # window "auto" (grid): on without NEE on
 
 
 @jit(inline="always")
-def split_count(k, active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing, pixel_est,
-                 hi, low, threshold):
-    """split_counts for entry k; after the window's roulette it divides its path's beta and gain."""
+def split_count(k, active, ray_d, hit, geo, beta, gain, path, gs, window):
+    """split_counts for entry k; after the window's roulette it divides its path's beta and gain
+    (the arrays it writes). Read-only tuples: hit = (prim, b1, b2) of the entries, geo = (tri,
+    tri_normal), path = (depth, pix, key) of the paths, window = the SplitPlan's (outgoing,
+    pixel_est, hi, low, threshold); callers build them at the call, never as a kernel's bound name."""
+    prim, b1, b2 = hit
+    tri, tri_normal = geo
+    depth, pix, key = path
+    outgoing, pixel_est, hi, low, threshold = window
     i = active[k]
     p = prim[k]
     if p < 0 or depth[i] < 1:
@@ -111,8 +117,8 @@ def split_counts(active, ray_d, hits, tri, tri_normal, state, gs, plan, ks):
     wanted = 0
     ended = 0
     for k in prange(active.shape[0]):
-        m = split_count(k, active, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing,
-                         pixel_est, hi, low, threshold)
+        m = split_count(k, active, ray_d, (prim, b1, b2), (tri, tri_normal), beta, gain, (depth, pix, key), gs,
+                        (outgoing, pixel_est, hi, low, threshold))
         ks[k] = m
         wanted += m
         if m == 0:

@@ -232,6 +232,12 @@ def usable(ctx, record, ps):
     return ps is None or not np.any(ps.col >= 0)
 
 
+def _limits(ctx, ls):
+    """The class kernels' `lim` (int32, rows L_*): rr_depth, max_depth, nee, the emissive triangles'
+    count, whether the scene has corner normals."""
+    return np.array([ctx.rr_depth, ctx.max_depth, int(ctx.nee), ls.n_lights, int(ls.smooth)], np.int32)
+
+
 def class_kernels(ctx, guided):
     """The shading kernels ("module.function") a render of ctx's scene may run on the lanes:
     `lanes.shade` where a vertex or an escape may be of the diffuse class, `glossy.shade_glossy`
@@ -257,7 +263,7 @@ def warm_up(ctx, buf, names, split=None):
     ls = _lane_scene(ctx)
     lanes = LaneBuffers(buf.capacity)
     lf, li, flags = lanes.f, lanes.i, lanes.flags
-    lim = np.array([ctx.rr_depth, ctx.max_depth, int(ctx.nee), ls.n_lights, int(ls.smooth)], np.int32)
+    lim = _limits(ctx, ls)
     state = buf.path_state(0)
     if "lanes.shade" in names:
         if ls.textured:
@@ -328,8 +334,8 @@ def split_lanes(lf, li, m, hit, prim, tri, tri_normal, state, gs, plan, ks, pare
         want = 0
         gone = 0
         for k in range(c * m // _CHUNKS, (c + 1) * m // _CHUNKS):
-            cnt = split_count(k, slot, ray_d, prim, b1, b2, tri, tri_normal, beta, gain, depth, pix, key, gs, outgoing,
-                              pixel_est, hi, low, threshold)
+            cnt = split_count(k, slot, ray_d, (prim, b1, b2), (tri, tri_normal), beta, gain, (depth, pix, key), gs,
+                              (outgoing, pixel_est, hi, low, threshold))
             ks[k] = cnt
             i = slot[k]
             for q in range(3):
@@ -885,7 +891,7 @@ def run(ctx, buf, n, ps, stats, split=None):
         lanes = buf._lanes = LaneBuffers(buf.capacity)
     accel = ctx.accel
     scene, _, centre, _, scratch = accel.packet_args()
-    lim = np.array([ctx.rr_depth, ctx.max_depth, int(ctx.nee), ls.n_lights, int(ls.smooth)], np.int32)
+    lim = _limits(ctx, ls)
     limits = (ctx.max_depth, ctx.rr_depth, ctx.nee)
     state = buf.path_state(n)
     splitting = split is not None and buf.capacity > buf.size

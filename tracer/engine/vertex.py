@@ -156,8 +156,8 @@ def shade_vertex(hit, surf, lt, gs, ps, lim, beta, L, L_cam, depth, prev_pdf, pr
             if nee and not delta:
                 shadow, so, sd, tmax, contrib = next_event(
                     sf, lt, surf.tri, x, ng, cos_o, wo, b, gs, slot, a, surf.eps[p],
-                    surf.eps, draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
-                    draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)), surf.mat_table)
+                    surf.eps, (draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
+                               draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1))), surf.mat_table)
 
             # The continuation from the mixture (the guide with probability 1 - a, else the BSDF), then
             # possibly the end of the path by Russian roulette

@@ -269,8 +269,8 @@ def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
         if not delta:
             ls = light_sample_at(
                 sf, lt, surf.tri, x, ng, cos_o, wo, b, gs, slot, a, surf.eps[p], surf.eps,
-                draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
-                draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1)), surf.mat_table)
+                (draw(ps, kk, i, bounce_dim(dk, LIGHT)), draw(ps, kk, i, bounce_dim(dk, LIGHT_POS)),
+                 draw(ps, kk, i, bounce_dim(dk, LIGHT_POS + 1))), surf.mat_table)
             ok, so, sd, tmax, contrib = ls.ok, ls.origin, ls.direction, ls.tmax, ls.contrib
             wl, dist, lel, pll, lt_tri, fb, pbb = ls.wl, ls.dist, ls.le, ls.pl, ls.tri, ls.f, ls.pdf
             # (a delta light's sample counts where the base gets no light from it: past a spot's cutoff

@@ -178,8 +178,8 @@ def trace_paths(rtc, packet, ray_o, ray_d, surf, lt, gs, ps, limits, state, spli
                 for k in range(LN):
                     if lane[k] < 0 or known[k]:
                         continue
-                    m = split_count(k, lane, d, prim, b1, b2, surf.tri, surf.normal, beta, gain, depth, pix, key,
-                                     gs, outgoing, pixel_est, split_hi, split_low, threshold)
+                    m = split_count(k, lane, d, (prim, b1, b2), (surf.tri, surf.normal), beta, gain, (depth, pix, key),
+                                    gs, (outgoing, pixel_est, split_hi, split_low, threshold))
                     if m == 0:
                         ended += 1
                         lane[k] = -1
