@@ -9,7 +9,9 @@ compiled signatures grew after the warm-up; the list must be empty.
 
 What it can detect: a class kernel of the lanes left to its first call (the glossy scene has all
 three classes: diffuse walls, metals, a mirror), split_lanes without a warm-up (a guide's window
-without NEE), the pilot's median splits (split_c small enough that the pilot splits) and a kernel
+without NEE), the pilot's median splits (split_c small enough that the pilot splits), the
+wavefront's shadow-ray step (a guide's recording passes with NEE: the throwaway paths may trace
+no shadow ray; it listed embree._occluded and add_unoccluded before warm_up_shadows) and a kernel
 called with argument types other than the warm-up's (grid's splats of int32 records and int64
 pilot leaves compiled two signatures)."""
 import os
@@ -60,7 +62,7 @@ print("LANES", r.stats["lane_samples"], r.stats["samples"], r.stats["nonfinite_s
 
 
 @pytest.mark.parametrize("guide, integrator", [("bsdf", "path"), ("photon:split_c=20", "path:nee=0"),
-                                               ("grid", "path:nee=0")])
+                                               ("grid", "path:nee=0"), ("photon", "path")])
 def test_no_kernel_compiles_after_the_warm_up(guide, integrator):
     """The plain render, and a guide's pilot, training and splitting final passes, dispatch no
     kernel for the first time after render()'s warm-up; the final passes ran on the lanes."""

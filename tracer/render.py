@@ -28,7 +28,7 @@ from .film import Film
 from .guiding import make_guide, warm_up_guides
 from .guiding.base import Guide
 from .integrators import make_integrator
-from .integrators.path import engine, trace_wave
+from .integrators.path import engine, trace_wave, warm_up_shadows
 from .methods import parse_spec
 from .lights import build_lights
 from .provenance import provenance
@@ -390,6 +390,8 @@ def _warm_up(ctx, g, splits, integ, kernels, crop):
     lanes = "lanes.classify" in kernels
     if g is not None or lanes or "thread_loop.trace_paths" in kernels or "path.shade" in kernels:
         trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats())
+    if "path.shade" in kernels and ctx.nee:
+        warm_up_shadows(ctx)
     if lanes:
         engine.warm_up(ctx, WaveBuffers(1, split=splits), kernels, warm_up_plan() if splits else None)
     if g is not None:
@@ -422,7 +424,7 @@ def compile_plan(guided, integ, accel, path_loop="lanes", lane_kernels=None):
         names = [n for n in names if n != "thread_loop.trace_paths"]
         if lanes:
             names += (list(lane_kernels) if lane_kernels is not None else
-                      ["lanes.classify"] + (["general.shade_general"] if guided else []))
+                      ["lanes.classify"] + (["listed.shade_listed"] if guided else []))
         if guided or not lanes:
             names.append("path.shade")
         if guided and accel == "embree" and path_loop == "thread":
@@ -496,7 +498,7 @@ def _stats(scene, stats, passes, spp, t_setup, t_start, t_render, settings, t_co
         "split_copies": int(stats.split_copies),
         "lane_samples": int(stats.lane_samples),
         "lane_general_vertices": int(stats.lane_general),
-        "lane_glossy_vertices": int(stats.lane_glossy),
+        "lane_listed_vertices": int(stats.lane_listed),
         "window_ended": int(stats.window_ended),
         **settings,
         "texture_memory_bytes": scene.textures.nbytes if len(scene.textures) else 0,

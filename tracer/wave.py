@@ -254,7 +254,7 @@ class Stats:
         self.split_copies = 0
         self.lane_samples = 0  # samples traced on the lanes of tracer.engine
         self.lane_general = 0  # ... the vertices of theirs that its general kernel shaded
-        self.lane_glossy = 0  # ... and its glossy kernel (engine.glossy)
+        self.lane_listed = 0  # ... and its listed kernel (engine.listed)
         self.window_ended = 0
 
     def tick(self, stage, t0):

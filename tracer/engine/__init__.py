@@ -4,8 +4,9 @@
   wavefront, the per-thread loop and the lanes' general kernel shade with it.
 - `lanes` (Embree only; `render(path_loop="lanes")`, CLI `--path-loop lanes`): a wave's paths
   as float32 structure-of-arrays lanes; under triangle lights its diffuse vertices (textured or
-  not) are shaded by a vectorised loop, its coats and metals by `glossy.shade_glossy`, every other
-  vertex by `shade_vertex`.
+  not) are shaded by a vectorised loop, its coats and metals by `listed.shade_listed` (which takes
+  the diffuse ones too under a guide: the guide's mixture, roulette and gain), every other vertex
+  by `shade_vertex`.
   The integrators reach it through `lanes.usable(ctx, record, ps)` and
   `lanes.run(ctx, buf, n, ps, stats, split)`, which trace a wave that a source started in a
   wave.WaveBuffers (splitting it by a splitting.SplitPlan) and leave each path's radiance and

@@ -12,7 +12,8 @@ field is one name there. A bounce runs these kernels over lanes 0 .. m-1:
   triangles only): the diffuse class (diffuse, its reflectance possibly a texture, flat or with
   corner normals; or an escape with no environment), the glossy class (opaque coats and metals
   that do not emit), or general; the AOVs and L_cam of the first two at the camera ray's hit; the
-  glossy and general lanes listed;
+  general lanes listed, and the listed kernel's (the glossy ones; under a guide the diffuse ones
+  too);
 - `reflectance` (`flat_reflectance` where no fast triangle is textured): each fast lane's colour,
   its texture evaluated;
 - `shade`: the diffuse class, one `prange` over the lanes that LLVM packs 8 or 16 to an
@@ -20,7 +21,8 @@ field is one name there. A bounce runs these kernels over lanes 0 .. m-1:
   32-bit: docs/throughput.md; the other lanes keep what the other kernels read): emission with
   its MIS weight, a light sample with MIS (alias table, a point uniform on the triangle), a cosine
   bounce, the roulette; `albedo_aov` its lanes' AOV albedo;
-- `shade_glossy` (engine.glossy): the glossy lanes, each through its BSDF's own functions;
+- `shade_listed` (engine.listed): the glossy lanes, and under a guide the diffuse ones too, each
+  in float64 through its BSDF's own functions and the guide's contract;
 - `shade_general` (engine.general): the general lanes, each through engine.vertex.shade_vertex in
   float64 (every material, texture and light), its results written into the lanes;
 - `occlude`: the shadow rays of all three, packed 16 to one rtcOccluded16, adding the unblocked
@@ -35,8 +37,9 @@ as the other path loops do: the images agree with theirs in expectation, not bit
 (tests/test_engine.py z-tests them).
 
 What a wave needs to run here (`usable`): Embree, and a pass that neither records nor takes
-external primary samples. A guide's final passes run here too: under its maps every vertex goes
-to the general kernel (`fast_allowed`).
+external primary samples. A guide's final passes run here too: under its maps, its roulette or
+its splitting (`fast_allowed`) the diffuse lanes go to the listed kernel with the glossy ones,
+which samples the guide's mixture; the general lanes to the general kernel, which does too.
 """
 import math
 import time
@@ -54,7 +57,7 @@ from ..material import TEX_BITMAP, TEX_CONSTANT, TEX_SLOT_BUMP, TEX_SLOT_KD, TEX
 from ..splitting import make_copy, merge_copies, split_count
 from ..wave import TRACE_PARTS
 from .general import shade_general
-from .glossy import corner_normal, shade_glossy
+from .listed import corner_normal, shade_listed
 from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, FLAG_ROWS, FLOAT_ROWS, G_N, G_UV, G_VN, HIT_ROWS, H_T,
                    INT_ROWS, KEY, LB, LG, LR, L_LIGHTS, L_MAX, L_NEE, L_RR, OX, OY, OZ, PAD, PDF, SB, SDX, SDY, SDZ, SG,
                    SHADOW, SHADOW_ROWS, SLOT, SOX, SOY, SOZ, SR, TL_AREA, TL_EMIT, TL_EPS, TL_FAST, TL_KD, TL_ONE_SIDED,
@@ -85,7 +88,7 @@ class LaneBuffers:
         self.shadow = _rows(len(SHADOW_ROWS), size, F)
         self.kd = _rows(3, size, F)  # the fast class's reflectance at the vertex
         self.fast = np.zeros(size, np.int32)  # the lane's vertex is of the fast class
-        self.lists = np.zeros((2, size), np.int32)  # the lanes the general kernel shades, the glossy kernel's
+        self.lists = np.zeros((2, size), np.int32)  # the lanes the general kernel shades, the listed kernel's
         self.ks = np.ones(size, np.int64)  # split_lanes: copies of each lane (0: the window ended it)
 
 
@@ -225,8 +228,8 @@ def fast_triangles(scene, lights):
 
 def usable(ctx, record, ps):
     """Whether a wave can run on the lanes: render(path_loop="lanes"), Embree, no records, no
-    primary samples. (A guide's maps and roulette are shade_vertex's: with them every vertex goes
-    to the general kernel, fast_allowed; its splitting is split_lanes'.)"""
+    primary samples. (A guide's maps and roulette are the listed and general kernels', fast_allowed;
+    its splitting is split_lanes'.)"""
     if ctx.path_loop != "lanes" or ctx.accel.name != "embree" or record:
         return False
     return ps is None or not np.any(ps.col >= 0)
@@ -240,19 +243,29 @@ def _limits(ctx, ls):
 
 def class_kernels(ctx, guided):
     """The shading kernels ("module.function") a render of ctx's scene may run on the lanes:
-    `lanes.shade` where a vertex or an escape may be of the diffuse class, `glossy.shade_glossy`
-    where a triangle is glossy, `general.shade_general` where one is general, an environment or a
-    point light lights the scene (every vertex general), or under a guide (whose maps make every
-    vertex general); `lanes.classify` always."""
+    `lanes.shade` where a vertex or an escape may be of the diffuse class, `listed.shade_listed`
+    where a triangle is glossy, or under a guide (`guided`) where one is diffuse,
+    `general.shade_general` where one is general or an environment or a point light lights the
+    scene (every vertex general); `lanes.classify` always."""
     ls = _lane_scene(ctx)
     names = ["lanes.classify"]
-    if ls.escape_fast or DIFFUSE_CLASS in ls.classes:
+    diffuse = ls.escape_fast or DIFFUSE_CLASS in ls.classes
+    if diffuse:
         names.append("lanes.shade")
-    if GLOSSY_CLASS in ls.classes:
-        names.append("glossy.shade_glossy")
-    if guided or GENERAL in ls.classes or not ls.escape_fast:
+    if GLOSSY_CLASS in ls.classes or (guided and diffuse):
+        names.append("listed.shade_listed")
+    if GENERAL in ls.classes or not ls.escape_fast:
         names.append("general.shade_general")
     return names
+
+
+def _colours(ls, lanes, m):
+    """The colour rows (lanes.kd) of the classed lanes 0 .. m-1: reflectance, or flat_reflectance
+    where no classed triangle is textured."""
+    if ls.textured:
+        reflectance(m, lanes.hit, lanes.prim, lanes.fast, ls.geo, ls.tl, ls.tinfo, ls.tint, ls.tdata, lanes.kd)
+    else:
+        flat_reflectance(m, lanes.prim, lanes.fast, ls.tl, lanes.kd)
 
 
 def warm_up(ctx, buf, names, split=None):
@@ -265,17 +278,15 @@ def warm_up(ctx, buf, names, split=None):
     lf, li, flags = lanes.f, lanes.i, lanes.flags
     lim = _limits(ctx, ls)
     state = buf.path_state(0)
+    if "lanes.shade" in names or "listed.shade_listed" in names:
+        _colours(ls, lanes, 0)
+        albedo_aov(li, 0, lanes.kd, lanes.prim, lanes.fast, state)
     if "lanes.shade" in names:
-        if ls.textured:
-            reflectance(0, lanes.hit, lanes.prim, lanes.fast, ls.geo, ls.tl, ls.tinfo, ls.tint, ls.tdata, lanes.kd)
-        else:
-            flat_reflectance(0, lanes.prim, lanes.fast, ls.tl, lanes.kd)
         shade(lf, li, 0, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.tl, lanes.kd, ls.alias_t,
               ls.alias_i, lim)
-        albedo_aov(li, 0, lanes.kd, lanes.prim, lanes.fast, state)
-    if "glossy.shade_glossy" in names:
-        shade_glossy(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :0], ls.geo, ls.tl, lanes.kd,
-                     ls.alias_t, ls.alias_i, lim, ctx.surfaces, state)
+    if "listed.shade_listed" in names:
+        shade_listed(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :0], ls.geo, ls.tl, lanes.kd,
+                     (ls.alias_t, ls.alias_i), lim, ctx.surfaces, state, ctx.guide_state, ctx.accel.centre)
     if "general.shade_general" in names:
         shade_general(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[0, :0], ctx.accel.centre,
                       ctx.surfaces, ctx.lights, ctx.guide_state, no_primary_samples(),
@@ -287,7 +298,8 @@ def warm_up(ctx, buf, names, split=None):
 
 def fast_allowed(gs):
     """Whether the fast class may shade under the GuideState gs: no maps, and the path tracer's own
-    roulette (survival min(max(beta), 0.95), drawn before the sampled ray), which it hard-codes."""
+    roulette (survival min(max(beta), 0.95), drawn before the sampled ray), which it hard-codes.
+    (Else the listed kernel takes the diffuse lanes.)"""
     return (gs.res[0] == 0 and gs.pixel_slot.shape[0] == 0 and gs.rr_late == 0 and gs.rr_min == 0.0
             and gs.rr_max == RR_MAX)
 
@@ -472,10 +484,11 @@ def intersect(fn, scene, scratch, lf, n, hit, prim):
 
 
 @kernel
-def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, flags, fast_lane, lists):
-    """Mark each lane 0 .. n-1 with its vertex's class (fast_lane: with use_fast, a hit's triangle's
-    tl[TL_FAST], an escape DIFFUSE_CLASS where escape_fast; else GENERAL), and list the GENERAL lanes
-    in order in lists[0], the GLOSSY_CLASS ones in lists[1]; returns how many of each. A lane with ks 0
+def classify(lf, li, n, hit, prim, tl, geo, list_diffuse, escape_fast, state, ks, flags, fast_lane, lists):
+    """Mark each lane 0 .. n-1 with its vertex's class (fast_lane: a hit's triangle's tl[TL_FAST],
+    an escape DIFFUSE_CLASS where escape_fast, else GENERAL), and list the GENERAL lanes in order in
+    lists[0], the listed kernel's in lists[1] (the GLOSSY_CLASS ones, and with list_diffuse the
+    DIFFUSE_CLASS ones too); returns how many of each. A lane with ks 0
     (split_lanes: the weight window ended its path) is in none: flags say it ends and has no shadow
     ray. For the lanes of the two classes it writes what shade_vertex writes into the
     wave's PathState `state` besides the path: at the camera ray's hit the AOVs' shading normal
@@ -490,11 +503,10 @@ def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, fl
         for k in range(c * n // _CHUNKS, (c + 1) * n // _CHUNKS):
             p = prim[k]
             cls = GENERAL
-            if use_fast:
-                if p >= 0:
-                    cls = np.int32(tl[TL_FAST, p])
-                elif escape_fast:
-                    cls = DIFFUSE_CLASS
+            if p >= 0:
+                cls = np.int32(tl[TL_FAST, p])
+            elif escape_fast:
+                cls = DIFFUSE_CLASS
             fast_lane[k] = cls
             if ks[k] == 0:
                 flags[ALIVE, k] = 0
@@ -503,7 +515,7 @@ def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, fl
             if cls == GENERAL:
                 g += 1
                 continue
-            if cls == GLOSSY_CLASS:
+            if cls == GLOSSY_CLASS or list_diffuse:
                 h += 1
             i = li[SLOT, k]
             first = li[DEPTH, k] == 0
@@ -536,7 +548,7 @@ def classify(lf, li, n, hit, prim, tl, geo, use_fast, escape_fast, state, ks, fl
             if fast_lane[k] == GENERAL:
                 lists[0, j] = k
                 j += 1
-            elif fast_lane[k] == GLOSSY_CLASS:
+            elif fast_lane[k] == GLOSSY_CLASS or list_diffuse:
                 lists[1, jc] = k
                 jc += 1
     return counts[_CHUNKS, 0], counts[_CHUNKS, 1]
@@ -883,7 +895,7 @@ def run(ctx, buf, n, ps, stats, split=None):
     buf.L, its AOVs and L_cam, as the other path loops leave them; split: a splitting.SplitPlan
     (buf made with split=True) or None. stats.trace_parts gets the seconds of the ray queries, the
     shading (both classes) and the rest; stats.lane_samples the paths, stats.lane_general the
-    vertices the general kernel shaded."""
+    vertices the general kernel shaded, stats.lane_listed the listed kernel's."""
     t0 = time.perf_counter()
     ls = _lane_scene(ctx)
     lanes = getattr(buf, "_lanes", None)
@@ -895,9 +907,10 @@ def run(ctx, buf, n, ps, stats, split=None):
     limits = (ctx.max_depth, ctx.rr_depth, ctx.nee)
     state = buf.path_state(n)
     splitting = split is not None and buf.capacity > buf.size
-    use_fast = fast_allowed(ctx.guide_state) and not splitting  # split_lanes reads the PathState
+    # the fast kernel leaves the PathState behind, which split_lanes reads
+    use_fast = fast_allowed(ctx.guide_state) and not splitting
     n_slots = n
-    rays = shadows = general = glossy = ended = 0
+    rays = shadows = general = listed = ended = 0
     surf = ctx.surfaces
     part = dict.fromkeys(TRACE_PARTS, 0.0)  # seconds of each step
     clock = time.perf_counter
@@ -926,22 +939,19 @@ def run(ctx, buf, n, ps, stats, split=None):
             ng = nc = 0
             classified = first or not (ls.all_fast and use_fast)
             if classified:  # else only the camera rays' hits (AOVs) need it
-                ng, nc = classify(lf, li, m, lanes.hit, lanes.prim, ls.tl, ls.geo, use_fast, ls.escape_fast, state,
-                                  lanes.ks, flags, lanes.fast, lanes.lists)
+                ng, nc = classify(lf, li, m, lanes.hit, lanes.prim, ls.tl, ls.geo, not use_fast, ls.escape_fast,
+                                  state, lanes.ks, flags, lanes.fast, lanes.lists)
                 ng, nc = int(ng), int(nc)
                 first = False
-            if use_fast and ng < m:
-                if ls.textured:
-                    reflectance(m, lanes.hit, lanes.prim, lanes.fast, ls.geo, ls.tl, ls.tinfo, ls.tint, ls.tdata,
-                                lanes.kd)
-                else:
-                    flat_reflectance(m, lanes.prim, lanes.fast, ls.tl, lanes.kd)
-                shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.tl, lanes.kd,
-                      ls.alias_t, ls.alias_i, lim)
+            if ng < m:
+                _colours(ls, lanes, m)
+                if use_fast:
+                    shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.tl, lanes.kd,
+                          ls.alias_t, ls.alias_i, lim)
                 if nc:
-                    shade_glossy(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :nc], ls.geo, ls.tl,
-                                 lanes.kd, ls.alias_t, ls.alias_i, lim, surf, state)
-                    glossy += nc
+                    shade_listed(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :nc], ls.geo, ls.tl,
+                                 lanes.kd, (ls.alias_t, ls.alias_i), lim, surf, state, ctx.guide_state, centre)
+                    listed += nc
                 if classified:
                     albedo_aov(li, m, lanes.kd, lanes.prim, lanes.fast, state)
             if ng:
@@ -963,7 +973,7 @@ def run(ctx, buf, n, ps, stats, split=None):
     stats.shadow_rays += shadows
     stats.lane_samples += n
     stats.lane_general += general
-    stats.lane_glossy += glossy
+    stats.lane_listed += listed
     for name, sec in part.items():
         stats.trace_parts[name] += sec
     stats.tick("trace", t0)

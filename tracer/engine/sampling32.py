@@ -30,6 +30,15 @@ _S16, _S13, _S8 = U32(16), U32(13), U32(8)
 BOUNCE, BLOCK = 2, 8
 D_DIR, D_LOBE, D_COIN, D_LIGHT, D_POS, D_RR = 0, 2, 3, 4, 5, 7
 TWO32 = 2.0 ** 32
+_STRATEGY = 1 << 24  # past every bounce's dimensions (BOUNCE + BLOCK x 4096)
+
+
+@jit(inline="always")
+def strategy_dim(depth):
+    """The dimension of the coin between a guide's map and the BSDF at bounce `depth` (0: the first hit):
+    one of its own past the bounces' blocks, whose eight slots the lanes use all (slot 3, tracer.rng's
+    STRATEGY, holds their alias coin)."""
+    return _STRATEGY + depth
 
 
 @jit(inline="always")

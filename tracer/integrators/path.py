@@ -47,7 +47,7 @@ from ..guiding.records import finalize_records
 from ..shading import write_shadow
 from ..splitting import merge_copies, split_wave
 from ..result import RenderResult, report_dark
-from ..wave import add_unoccluded, compact, sanitize
+from ..wave import WaveBuffers, add_unoccluded, compact, sanitize
 from .base import Integrator
 
 __all__ = ["MAX_BOUNCES", "PathIntegrator", "shade", "trace_wave"]
@@ -183,6 +183,16 @@ def shade(active, ray_o, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
                 r_wi[r, c] = v.wi[c]
                 r_L0[r, c] = L[i, c]
                 r_beta[r, c] = v.beta[c]
+
+
+def warm_up_shadows(ctx):
+    """Dispatch the wavefront's shadow-ray step (ctx.accel.occluded, add_unoccluded) with trace_wave's
+    argument types: the throwaway paths of a render's warm-up may trace no shadow ray, and then
+    these compiled inside a guide's first recording pass (3.5 s of a 5 s budget on a new install)."""
+    buf = WaveBuffers(1)
+    buf.sp_d[0, 2] = 1.0  # a ray of length 0 from the origin: its answer is not used
+    occ = ctx.accel.occluded(buf.sp_o[:1], buf.sp_d[:1], buf.sp_tmax[:1])
+    add_unoccluded(buf.sp_path[:0], occ[:0], buf.sp_L[:0], buf.L, buf.sp_entry[:0], buf.records.L0, 0, False)
 
 
 def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, direct=True, split=None):
