@@ -99,11 +99,11 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
     guided = gs.res[0] > 0 or gs.pixel_slot.shape[0] > 0
     aov = state.aov
     aov_open = state.aov_open
-    s_beta = state.beta
-    s_gain = state.gain
-    s_depth = state.depth
-    s_pdf = state.prev_pdf
-    s_delta = state.prev_delta
+    beta = state.beta
+    gain = state.gain
+    depth = state.depth
+    prev_pdf = state.prev_pdf
+    prev_delta = state.prev_delta
     pix = state.pix
     material = surf.material
     mat_type = surf.mat_type
@@ -125,22 +125,22 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
              geo[2, p] + b1 * np.float64(geo[5, p]) + b2 * np.float64(geo[8, p]))
         ng = (np.float64(geo[G_N, p]), np.float64(geo[G_N + 1, p]), np.float64(geo[G_N + 2, p]))
         cos_o = -dot(d, ng)
-        beta = (np.float64(lf[BR, k]), np.float64(lf[BG, k]), np.float64(lf[BB, k]))
-        depth = li[DEPTH, k]
-        prev_delta = li[DELTA, k] != 0
+        bt = (np.float64(lf[BR, k]), np.float64(lf[BG, k]), np.float64(lf[BB, k]))
+        dk = li[DEPTH, k]
+        pdelta = li[DELTA, k] != 0
         key = li[KEY, k]
-        base = BOUNCE + BLOCK * depth
+        base = BOUNCE + BLOCK * dk
 
         # emission (a diffuse emitter, one-sided), MIS-weighted against the light sample that could have found it
         if cos_o > 0.0 and tl[TL_SEL, p] > 0.0:
             th = np.float64(hit[H_T, k])
             we = 1.0
-            if nee and depth > 0 and not prev_delta:
+            if nee and dk > 0 and not pdelta:
                 pl = tl[TL_SEL, p] * th * th / (tl[TL_AREA, p] * cos_o)
                 pp = np.float64(lf[PDF, k]) ** 2
                 we = pp / (pp + pl * pl)
             for c in range(3):
-                lf[LR + c, k] += beta[c] * tl[TL_EMIT + c, p] * we
+                lf[LR + c, k] += bt[c] * tl[TL_EMIT + c, p] * we
 
         ns = corner_normal(geo, p, b1, b2)
         s, t = frame(ns)
@@ -160,24 +160,24 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
                 aov[i, c] = alb[c]
             aov_open[i] = smooth_metal
         black = (int(prm[14]) & ONE_SIDED) != 0 and wo[2] <= 0.0  # a one-sided surface seen from behind
-        on = (max_depth < 0 or depth + 1 < max_depth) and not black
+        on = (max_depth < 0 or dk + 1 < max_depth) and not black
         eps = np.float64(tl[TL_EPS, p])
-        gain = s_gain[i]
+        gn = gain[i]
 
         # the guide's roulette of the bounce that arrived here, after its emission (never after a delta bounce)
-        if on and gs.rr_late != 0 and depth >= rr_depth and not prev_delta:
-            qa = survival(beta, gain, gs)
+        if on and gs.rr_late != 0 and dk >= rr_depth and not pdelta:
+            qa = survival(bt, gn, gs)
             if np.float64(rand32(key, base - BLOCK + D_RR)) >= qa:
                 on = False
             else:
-                beta = (beta[0] / qa, beta[1] / qa, beta[2] / qa)
+                bt = (bt[0] / qa, bt[1] / qa, bt[2] / qa)
 
         # the guide's map and the probability a of sampling the BSDF
         slot = -1
         a = 1.0
         if on and guided and not smooth_metal:
             nf = ng if cos_o >= 0.0 else (-ng[0], -ng[1], -ng[2])
-            _, slot, a = locate(gs, (x[0] + centre[0], x[1] + centre[1], x[2] + centre[2]), nf, pix[i], depth)
+            _, slot, a = locate(gs, (x[0] + centre[0], x[1] + centre[1], x[2] + centre[2]), nf, pix[i], dk)
 
         # a light sample: an emissive triangle from the alias table, a point uniform on it, MIS
         # against the mixture's density of that direction
@@ -219,9 +219,9 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
                             sh[SDY, k] = e[1] / te
                             sh[SDZ, k] = e[2] / te
                             sh[TMAX, k] = te * SHORT
-                            sh[SR, k] = beta[0] * f[0] * tl[TL_EMIT, lj] * g
-                            sh[SG, k] = beta[1] * f[1] * tl[TL_EMIT + 1, lj] * g
-                            sh[SB, k] = beta[2] * f[2] * tl[TL_EMIT + 2, lj] * g
+                            sh[SR, k] = bt[0] * f[0] * tl[TL_EMIT, lj] * g
+                            sh[SG, k] = bt[1] * f[1] * tl[TL_EMIT + 1, lj] * g
+                            sh[SB, k] = bt[2] * f[2] * tl[TL_EMIT + 2, lj] * g
         if not on:
             continue
 
@@ -229,7 +229,7 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
         # D_LOBE); its weight with the mixture's density; then the roulette
         u0 = np.float64(rand32(key, base + D_DIR))
         u1 = np.float64(rand32(key, base + D_DIR + 1))
-        if a < 1.0 and np.float64(rand32(key, strategy_dim(depth))) >= a:
+        if a < 1.0 and np.float64(rand32(key, strategy_dim(dk))) >= a:
             wiw, pg = slot_sample(gs, slot, u0, u1)
             wi = to_local(wiw, s, t, ns)
             f, pbs = _eval_pdf(kind, prm, table, wo, wi)
@@ -252,12 +252,12 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
                 pdf = pm
         if smooth and ((wo[2] * wi[2] > 0.0) != (cos_o * dot(wiw, ng) > 0.0)):
             wt = _NO_F
-        gain = gain * ratio
-        nb = (beta[0] * wt[0], beta[1] * wt[1], beta[2] * wt[2])
+        gn = gn * ratio
+        nb = (bt[0] * wt[0], bt[1] * wt[1], bt[2] * wt[2])
         bmax = max(nb[0], max(nb[1], nb[2]))
-        go = bmax > 0.0 and math.isfinite(bmax) and depth + 1 < MAX_BOUNCES
-        if go and depth + 1 >= rr_depth and gs.rr_late == 0:
-            qb = survival(nb, gain, gs)
+        go = bmax > 0.0 and math.isfinite(bmax) and dk + 1 < MAX_BOUNCES
+        if go and dk + 1 >= rr_depth and gs.rr_late == 0:
+            qb = survival(nb, gn, gs)
             go = np.float64(rand32(key, base + D_RR)) < qb
             nb = (nb[0] / qb, nb[1] / qb, nb[2] / qb)
         if go:
@@ -269,13 +269,13 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
             lf[DY, k] = wiw[1]
             lf[DZ, k] = wiw[2]
             lf[PDF, k] = pdf
-            li[DEPTH, k] = np.int32(depth + 1)
+            li[DEPTH, k] = np.int32(dk + 1)
             li[DELTA, k] = np.int32(1) if dlt else np.int32(0)
             for c in range(3):
                 lf[BR + c, k] = nb[c]
-                s_beta[i, c] = nb[c]
-            s_gain[i] = gain
-            s_depth[i] = depth + 1
-            s_pdf[i] = pdf
-            s_delta[i] = dlt
+                beta[i, c] = nb[c]
+            gain[i] = gn
+            depth[i] = dk + 1
+            prev_pdf[i] = pdf
+            prev_delta[i] = dlt
             flags[ALIVE, k] = np.int32(1)
