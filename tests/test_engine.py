@@ -73,6 +73,16 @@ def _blocks(a):
     return a[: h * BLOCK, : w * BLOCK].reshape(h, BLOCK, w, BLOCK, 3).mean(axis=(1, 3)).reshape(-1, 3)
 
 
+def _lanes_and_thread(scene, **kw):
+    """The same render on the lanes (seed 1) and on the per-thread loop (seed 2: independent), each
+    checked free of non-finite samples."""
+    a = tracer.render(scene, seed=1, path_loop="lanes", **kw)
+    b = tracer.render(scene, seed=2, path_loop="thread", **kw)
+    assert_clean(a, "lanes")
+    assert_clean(b, "thread")
+    return a, b
+
+
 def _assert_same_image(a, b, what, lit_share=0.0):
     """z-tests of the image means of renders a and b (independent seeds) and of their BLOCK x BLOCK
     block means, each side's variance from its own film (a block mean's: its pixels' mean variance
@@ -101,10 +111,7 @@ def _assert_same_image(a, b, what, lit_share=0.0):
 def test_lanes_equal_the_per_thread_loop_in_expectation(name, kw, general):
     """Image mean and block means of the lanes against the per-thread loop (independent seeds)."""
     scene = _scene(name)
-    a = tracer.render(scene, spp=64, seed=1, path_loop="lanes", **kw)
-    b = tracer.render(scene, spp=64, seed=2, path_loop="thread", **kw)
-    assert_clean(a, "lanes")
-    assert_clean(b, "thread")
+    a, b = _lanes_and_thread(scene, spp=64, **kw)
     assert a.stats["lane_samples"] == a.stats["samples"] > 0, "some pass did not run on the lanes"
     assert b.stats["lane_samples"] == 0
     assert (a.stats["lane_general_vertices"] > 0) == general
@@ -120,10 +127,7 @@ def test_a_guides_final_passes_run_on_the_lanes(guide):
     maps from its own seed: both estimate the same image without bias)."""
     scene = _scene("ajar", 32)
     kw = dict(spp=48, guide=guide, max_depth=6)
-    a = tracer.render(scene, seed=1, path_loop="lanes", **kw)
-    b = tracer.render(scene, seed=2, path_loop="thread", **kw)
-    assert_clean(a, "lanes")
-    assert_clean(b, "thread")
+    a, b = _lanes_and_thread(scene, **kw)
     assert 0 < a.stats["lane_samples"] < a.stats["samples"]
     # ajar's vertices are all of the diffuse class: under the guide's maps the listed kernel shades
     # them, none goes to the general kernel
@@ -144,9 +148,7 @@ def test_smooth_shading_on_the_fast_class(tmp_path):
     scene = _smooth_sphere_scene(tmp_path)
     assert scene.tri_vn.shape[0] > 0
     kw = dict(spp=96, max_depth=5)
-    a = tracer.render(scene, seed=1, path_loop="lanes", **kw)
-    b = tracer.render(scene, seed=2, path_loop="thread", **kw)
-    assert_clean(a, "lanes")
+    a, b = _lanes_and_thread(scene, **kw)
     assert a.stats["lane_general_vertices"] == 0 and a.stats["lane_samples"] == a.stats["samples"]
     _assert_same_image(a, b, "smooth sphere")
     a4, b4 = (tracer.render(scene, spp=4, seed=3, path_loop=loop, max_depth=2) for loop in ("lanes", "thread"))
@@ -191,9 +193,7 @@ def test_textured_diffuse_on_the_fast_class():
     assert np.ptp(b.aovs["albedo"]) > 0.3  # the textures vary over the image
     np.testing.assert_allclose(a.aovs["albedo"], b.aovs["albedo"], atol=2e-5)
     kw = dict(spp=64, max_depth=4)
-    a = tracer.render(scene, seed=1, path_loop="lanes", **kw)
-    b = tracer.render(scene, seed=2, path_loop="thread", **kw)
-    assert_clean(a, "lanes")
+    a, b = _lanes_and_thread(scene, **kw)
     _assert_same_image(a, b, "textured box")
 
 
@@ -218,10 +218,7 @@ def test_guided_vertices_of_every_class_on_the_lanes(guide):
     sample's MIS weight passes: NEE dominates on this scene's large light."""
     scene = _scene("glossy", 36)
     kw = dict(spp=64, guide=guide, max_depth=6)
-    a = tracer.render(scene, seed=1, path_loop="lanes", **kw)
-    b = tracer.render(scene, seed=2, path_loop="thread", **kw)
-    assert_clean(a, "lanes")
-    assert_clean(b, "thread")
+    a, b = _lanes_and_thread(scene, **kw)
     assert not a.stats["guide_stats"]["switched_off"]
     assert a.stats["lane_listed_vertices"] > 0 and a.stats["lane_general_vertices"] > 0
     _assert_same_image(a, b, f"glossy under {guide}, lanes against thread", lit_share=0.5)
@@ -275,10 +272,7 @@ def test_glossy_materials_on_their_own_kernel(kind):
     b = tracer.render(scene, spp=4, seed=3, path_loop="thread", max_depth=3)
     np.testing.assert_allclose(a.aovs["albedo"], b.aovs["albedo"], rtol=2e-5, atol=2e-6)
     kw = dict(spp=96, max_depth=6)
-    a = tracer.render(scene, seed=1, path_loop="lanes", **kw)
-    b = tracer.render(scene, seed=2, path_loop="thread", **kw)
-    assert_clean(a, "lanes")
-    assert_clean(b, "thread")
+    a, b = _lanes_and_thread(scene, **kw)
     assert a.stats["lane_samples"] == a.stats["samples"]
     assert a.stats["lane_general_vertices"] == 0 and a.stats["lane_listed_vertices"] > 0
     _assert_same_image(a, b, f"glossy box ({kind})")

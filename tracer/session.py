@@ -150,7 +150,7 @@ class Session:
             self.bar.set_description_str(name)  # (set_description would add a colon to the bar's own)
 
     def run_pass(self, film, spp, kind, learn=False, source=None, split=None, deadline=False, wave=None,
-                 sweeps=MIN_SWEEPS):
+                 sweeps=MIN_SWEEPS, path_loop=None):
         """Render `spp` more samples per pixel from `source` (default: the camera) into `film`, in
         waves; with `learn`, the guide observes the vertices and updates after the pass. split: a
         splitting.SplitPlan for the waves (final passes), or None. deadline: with a time budget,
@@ -158,8 +158,10 @@ class Session:
         `sweeps` samples), its last sweep over the pixels partial (those pixels get one sample
         more than the rest; out_of_time is set). wave(sample0, g0, n), if given, traces each wave
         of the pass's spp x pixels paths instead of the path tracer (an integrator's own, e.g.
-        gpt's base and offsets, which adds to `film` itself). Raises KeyboardInterrupt between
-        waves after Ctrl-C, Stop when the callback returns False."""
+        gpt's base and offsets, which adds to `film` itself). path_loop: the loop this pass's waves
+        take in place of the render's (ctx.path_loop), e.g. "thread" for a pass whose samples must
+        be tracer.rng's (the lanes draw their own). Raises KeyboardInterrupt between waves after
+        Ctrl-C, Stop when the callback returns False."""
         ctx, buf, g = self.ctx, self.buf, self.guide
         source = self.camera if source is None else source
         index = next((j for j, (f, _) in enumerate(self.films) if f is film), None)
@@ -171,6 +173,9 @@ class Session:
         self._pass_paths, self._pass_seconds = 0, 0.0
         limit = (lambda n: self.wave_limit(n, film, sweeps)) if deadline and self.time is not None else None
         total = source.count(ctx, spp) if wave is None else spp * ctx.n_pixels
+        loop = ctx.path_loop
+        if path_loop is not None:
+            ctx.path_loop = path_loop
         try:
             if wave is None:
                 trace_source(ctx, source, film, spp, self.sample0, buf, self.stats, observe, direct, split,
@@ -182,6 +187,8 @@ class Session:
         except KeyboardInterrupt:  # between waves: the waves traced are in the film, and in the stats' passes
             self._end_pass(spp, kind, index, tp, total, interrupted=True)
             raise
+        finally:
+            ctx.path_loop = loop
         entry = self._end_pass(spp, kind, index, tp, total)
         if learn:
             tl = _time.perf_counter()

@@ -198,6 +198,36 @@ def light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_e
 
 
 @jit(inline="always")
+def guided_weight(f, pbs, pg, a):
+    """A direction drawn from the guide's map (its density pg) as a sample of the mixture with
+    probability a of the BSDF (f cos and density pbs of that direction): (f cos / pdf, the
+    mixture's pdf, p_bsdf / pdf); a zero weight and ratio 1 where pdf is 0."""
+    pdf = a * pbs + (1.0 - a) * pg
+    wt = BLACK
+    ratio = 1.0
+    if pdf > 0.0:
+        inv = 1.0 / pdf
+        wt = (f[0] * inv, f[1] * inv, f[2] * inv)
+        ratio = pbs * inv
+    return wt, pdf, ratio
+
+
+@jit(inline="always")
+def bsdf_in_mixture(gs, slot, a, wiw, wt, pdf, dlt):
+    """A direction wiw the BSDF sampled (weight wt, density pdf, dlt: from a delta lobe) as a sample
+    of the mixture with map `slot`: (its weight, the mixture's density, p_bsdf / p_mixture), as
+    given (ratio 1) where a is 1 or pdf 0. A delta lobe (of a material that also has a smooth one)
+    is chosen with probability a x its own; the guide never produces its direction."""
+    ratio = 1.0
+    if a < 1.0 and pdf > 0.0:
+        pm = a * pdf if dlt else mixture_pdf(gs, slot, a, pdf, wiw)
+        ratio = pdf / pm
+        wt = (wt[0] * ratio, wt[1] * ratio, wt[2] * ratio)
+        pdf = pm
+    return wt, pdf, ratio
+
+
+@jit(inline="always")
 def sample_mixture(sf, gs, slot, a, wo, ng, cos_o, u0, u1, u_lobe, u_strategy, table):
     """Sample the continuation from the mixture (sampleMat): the guide's map `slot` with probability
     1 - a (u_strategy >= a), else the BSDF (u_lobe picks its lobe); u0, u1 the direction.
@@ -211,27 +241,14 @@ def sample_mixture(sf, gs, slot, a, wo, ng, cos_o, u0, u1, u_lobe, u_strategy, t
         if crosses(sf, cos_o, ng, wo, wi, wiw):
             f = BLACK
         pbs = bsdfs.bsdf_pdf(sf.bp, wo, wi, table)
-        pdf = a * pbs + (1.0 - a) * pg
-        wt = BLACK
-        ratio = 1.0
-        if pdf > 0.0:
-            inv = 1.0 / pdf
-            wt = (f[0] * inv, f[1] * inv, f[2] * inv)
-            ratio = pbs * inv
+        wt, pdf, ratio = guided_weight(f, pbs, pg, a)
         return wiw, wt, pdf, pbs, False, 1, ratio
     wi, wt, pdf, dlt = bsdfs.bsdf_sample(sf.bp, wo, u0, u1, u_lobe, True, table)
     wiw = to_world(wi, sf.s, sf.t, sf.ns)
     if crosses(sf, cos_o, ng, wo, wi, wiw):
         wt = BLACK
     pbs = pdf
-    ratio = 1.0
-    if a < 1.0 and pdf > 0.0:
-        # a delta lobe (of a material that also has a smooth one) is chosen with probability a x its
-        # own; the guide never produces its direction
-        pm = a * pdf if dlt else mixture_pdf(gs, slot, a, pdf, wiw)
-        ratio = pdf / pm
-        wt = (wt[0] * ratio, wt[1] * ratio, wt[2] * ratio)
-        pdf = pm
+    wt, pdf, ratio = bsdf_in_mixture(gs, slot, a, wiw, wt, pdf, dlt)
     return wiw, wt, pdf, pbs, dlt, 0, ratio
 
 

@@ -34,16 +34,13 @@ from ..bsdfs import (COATED, DIFFUSE, METAL, ONE_SIDED, _coated_eval_pdf, _coate
 from ..guiding.contract import locate, slot_sample
 from ..material import _unit_toward
 from ..sampling import dot, frame, to_local, to_world
-from ..shading import mixture_pdf, offset_point, survival
+from ..shading import BLACK, bsdf_in_mixture, guided_weight, mixture_pdf, offset_point, survival
 from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, G_N, G_VN, H_T, KEY, L_LIGHTS, L_MAX, L_NEE, L_RR,
                    L_SMOOTH, LR, OX, OY, OZ, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SLOT, SOX, SOY, SOZ, SR,
                    TL_AREA, TL_EMIT, TL_EPS, TL_SEL, TMAX)
 from .sampling32 import (BLOCK, BOUNCE, D_COIN, D_DIR, D_LIGHT, D_LOBE, D_POS, D_RR, SHORT, alias_column, hash32,
                          rand32, strategy_dim)
 from .vertex import MAX_BOUNCES
-
-_NO_F = (0.0, 0.0, 0.0)
-
 
 @jit(inline="always")
 def corner_normal(geo, p, b1, b2):
@@ -233,25 +230,14 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
             wiw, pg = slot_sample(gs, slot, u0, u1)
             wi = to_local(wiw, s, t, ns)
             f, pbs = _eval_pdf(kind, prm, table, wo, wi)
-            pdf = a * pbs + (1.0 - a) * pg
-            wt = _NO_F
-            ratio = 1.0
-            if pdf > 0.0:
-                wt = (f[0] / pdf, f[1] / pdf, f[2] / pdf)
-                ratio = pbs / pdf
+            wt, pdf, ratio = guided_weight(f, pbs, pg, a)
             dlt = False
         else:
             wi, wt, pdf, dlt = _sample(kind, prm, table, wo, u0, u1, np.float64(rand32(key, base + D_LOBE)))
             wiw = to_world(wi, s, t, ns)
-            ratio = 1.0
-            if a < 1.0 and pdf > 0.0:
-                # a delta lobe is chosen with probability a x its own; the guide never produces its direction
-                pm = a * pdf if dlt else mixture_pdf(gs, slot, a, pdf, wiw)
-                ratio = pdf / pm
-                wt = (wt[0] * ratio, wt[1] * ratio, wt[2] * ratio)
-                pdf = pm
+            wt, pdf, ratio = bsdf_in_mixture(gs, slot, a, wiw, wt, pdf, dlt)
         if smooth and ((wo[2] * wi[2] > 0.0) != (cos_o * dot(wiw, ng) > 0.0)):
-            wt = _NO_F
+            wt = BLACK
         gn = gn * ratio
         nb = (bt[0] * wt[0], bt[1] * wt[1], bt[2] * wt[2])
         bmax = max(nb[0], max(nb[1], nb[2]))

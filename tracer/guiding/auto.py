@@ -228,13 +228,8 @@ class AutoGuide(Guide):
         """Run one trial pass of candidate g (None: bsdf) into film; returns {spp, time}: the pass's
         seconds without the time the guide spent observing its records. Every trial runs on the
         wavefront (a guide's records need it), bsdf's too, so their speeds compare."""
-        ctx = session.ctx
-        loop, ctx.path_loop = ctx.path_loop, "wave"
         self._observed = 0.0
-        try:
-            session.run_pass(film, spp, "trial", learn=g is not None)
-        finally:
-            ctx.path_loop = loop
+        session.run_pass(film, spp, "trial", learn=g is not None, path_loop="wave")
         e = session.passes[-1]
         return {"spp": e["spp"], "time": max(e["time"] - self._observed, 1e-9),
                 "time_update": e.get("time_update", 0.0)}

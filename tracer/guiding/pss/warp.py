@@ -250,17 +250,14 @@ class PSSGuide(Guide):
         sample0 = session.sample0
         # examples() pairs each candidate's value with its primary sample as tracer.rng draws it, so
         # the candidates take a loop that draws tracer.rng's numbers (the lanes draw their own)
-        loop, ctx.path_loop = ctx.path_loop, ("thread" if ctx.path_loop == "lanes" else ctx.path_loop)
-        try:
-            if session.time is None:
-                session.run_pass(film, n_c, "train")
-            else:  # 1 spp at a time, while within half the learning share of the budget
-                for _ in range(n_c):
-                    session.run_pass(film, 1, "train")
-                    if session.elapsed() > 0.5 * self.share * session.time:
-                        break
-        finally:
-            ctx.path_loop = loop
+        loop = "thread" if ctx.path_loop == "lanes" else None
+        if session.time is None:
+            session.run_pass(film, n_c, "train", path_loop=loop)
+        else:  # 1 spp at a time, while within half the learning share of the budget
+            for _ in range(n_c):
+                session.run_pass(film, 1, "train", path_loop=loop)
+                if session.elapsed() > 0.5 * self.share * session.time:
+                    break
         t0 = _time.perf_counter()
         if session.time is not None:
             seconds = self.share * session.time - session.elapsed()
