@@ -68,9 +68,9 @@ def _parser():
                    help="render a Mitsuba scene XML whose meshes or textures are partly absent (warnings)")
     p.add_argument("--accel", default="embree", help=f"ray queries: {' or '.join(ACCELS)} (default embree)")
     p.add_argument("--path-loop", metavar="LOOP",
-                   help="lanes (default: float32 lanes, tracer.engine, for every pass that records nothing, a "
-                        "guide's final passes included; its training passes run on the wavefront), thread (each "
-                        "thread's packets of paths to their end) or wave (one kernel per stage)")
+                   help="lanes (default: float32 lanes, tracer.engine, for every pass, a guide's training and "
+                        "final passes included), thread (each thread's packets of paths to their end; a guide's "
+                        "training on the wavefront) or wave (one kernel per stage)")
     p.add_argument("--filter", default="box", help="pixel filter: box (default) or point (pixel centres)")
     p.add_argument("--crop", help="render only the window x0,y0,w,h of the image")
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
@@ -252,8 +252,9 @@ def _compile_notice(guide, integ, accel, path_loop):
     from .guiding import REGISTRY
     from .render import COMPILE_NOTE, compile_plan
 
-    guided = guide in REGISTRY and REGISTRY[guide][0] is not None
-    if not _jit.kernels_cached(*compile_plan(guided, integ, accel, path_loop)):
+    cls = REGISTRY[guide][0] if guide in REGISTRY else None
+    if not _jit.kernels_cached(*compile_plan(cls is not None, integ, accel, path_loop,
+                                             wave_records=cls is not None and cls.records_loop == "wave")):
         _note(COMPILE_NOTE)
 
 

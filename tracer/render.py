@@ -81,11 +81,11 @@ def render(scene, spp=None, time=None, guide="bsdf", max_depth=None, rr_depth=No
     max_depth, rr_depth, seed: override the scene's render settings (Mitsuba conventions)
     accel      "embree" or "numba"; threads: worker threads (default: all cores)
     path_loop  "lanes" (the default, None: the same, without a warning where the accel is not Embree
-               and the wavefront runs instead): every pass that records nothing (a guide's final passes included)
-               runs on the float32 lanes of tracer.engine (Embree only): diffuse, textured diffuse,
-               plastic and metal vertices under triangle lights in class kernels, every other vertex
-               through the general one; a guide's training passes take the wavefront, a pss warp's
-               passes the per-thread loop. "thread": passes that record and split nothing trace each
+               and the wavefront runs instead): every pass (a guide's training and final passes
+               included) runs on the float32 lanes of tracer.engine (Embree only): diffuse, textured
+               diffuse, plastic and metal vertices under triangle lights in class kernels, every other
+               vertex through the general one; a pss warp's passes take the per-thread loop, auto's
+               trials the wavefront. "thread": passes that record and split nothing trace each
                thread's paths to their end in packets of 16 (tracer.integrators.thread_loop; Embree
                only); "wave": every pass runs the wavefront, one kernel per stage. "thread" and "wave"
                give the same image bit for bit; "lanes" one equal in expectation, with other random
@@ -291,10 +291,11 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         lane_kernels = engine.class_kernels(ctx, g is not None)  # makes the lanes' scene tables: set-up time
         t_setup += _time.perf_counter() - t_lanes
     # Trace throwaway paths first: they compile the kernels the render will run (or load them from
-    # the cache), so that neither the time budget nor the stats count Numba's compile. Recorded
-    # paths (a guide's training) run the wavefront, the rest the lanes (or the loop path_loop
-    # names); a render that runs neither (gpt's hybrid shift without a guide) compiles neither.
-    kernels = compile_plan(g is not None, integ, acc.name, path_loop, lane_kernels)
+    # the cache), so that neither the time budget nor the stats count Numba's compile. The passes
+    # run on the lanes (a guide's recorded paths too), or the loop path_loop
+    # names; a render that runs neither (gpt's hybrid shift without a guide) compiles neither.
+    kernels = compile_plan(g is not None, integ, acc.name, path_loop, lane_kernels,
+                           g is not None and g.records_loop == "wave")
     if not _jit.kernels_cached(*kernels):
         log.warning(COMPILE_NOTE, extra={"compile_notice": True})
     t0 = _time.perf_counter()
@@ -384,9 +385,15 @@ def _reserve_text(integrator, solve, den):
 def _warm_up(ctx, g, splits, integ, kernels, crop):
     """Trace throwaway paths through each kernel of `kernels` (compile_plan's) and the guide's and
     integrator's own warm-ups."""
-    if g is not None:
-        trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats(),
-                   observe=lambda rec: None)
+    if g is not None:  # recorded paths: on the render's loop, and on the wavefront where the plan holds it
+        render_loop = ctx.path_loop
+        try:
+            for loop in dict.fromkeys([render_loop] + (["wave"] if "path.shade" in kernels else [])):
+                ctx.path_loop = loop
+                trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats(),
+                           observe=lambda rec: None)
+        finally:
+            ctx.path_loop = render_loop
     lanes = "lanes.classify" in kernels
     if g is not None or lanes or "thread_loop.trace_paths" in kernels or "path.shade" in kernels:
         trace_wave(ctx, WaveBuffers(1), CameraSource(), Film(crop[2], crop[3]), 0, 0, 1, Stats())
@@ -404,18 +411,18 @@ def _warm_up(ctx, g, splits, integ, kernels, crop):
 
 def engine_gaps(accel):
     """What keeps a render's passes off the lanes of tracer.engine (path_loop="lanes"): short reasons.
-    (A guide's training passes, which record, and its splitting final passes take the other
-    loops without a word: the render's stats say how many samples the lanes traced.)"""
+    (Passes that take external primary samples, pss's, take the other loops without a word: the
+    render's stats say how many samples the lanes traced.)"""
     return [f"the {accel} accel (the lanes need Embree)"] if accel != "embree" else []
 
 
-def compile_plan(guided, integ, accel, path_loop="lanes", lane_kernels=None):
+def compile_plan(guided, integ, accel, path_loop="lanes", lane_kernels=None, wave_records=False):
     """The kernels ("module.function") a render's warm-up compiles: the integrator's, the lanes'
     in place of the per-thread loop under path_loop "lanes" (lane_kernels: the scene's,
-    engine.lanes.class_kernels; None: a guess without the scene), the wavefront's where a guide
-    records paths or neither loop can run (another accel, path_loop="wave"), and the guides'
-    photon tracer. What _jit.kernels_cached checks before a render, to say that a compile is
-    coming."""
+    engine.lanes.class_kernels; None: a guess without the scene), the wavefront's where the lanes cannot run (another accel,
+    path_loop="wave" or "thread" under a guide) or the guide records on it (wave_records: its
+    records_loop), and the guides' photon tracer. What _jit.kernels_cached checks before a render,
+    to say that a compile is coming."""
     path_loop = path_loop or "lanes"
     names = list(integ.kernels())
     plain = "thread_loop.trace_paths" in names  # the path tracer's passes
@@ -425,7 +432,7 @@ def compile_plan(guided, integ, accel, path_loop="lanes", lane_kernels=None):
         if lanes:
             names += (list(lane_kernels) if lane_kernels is not None else
                       ["lanes.classify"] + (["listed.shade_listed"] if guided else []))
-        if guided or not lanes:
+        if not lanes or (guided and wave_records):
             names.append("path.shade")
         if guided and accel == "embree" and path_loop == "thread":
             names.append("thread_loop.trace_paths")

@@ -171,6 +171,7 @@ class Session:
         observe = g.observe if learn else None
         direct = g.records_direct(ctx) if g is not None else True
         self._pass_paths, self._pass_seconds = 0, 0.0
+        self._pass_lanes = (self.stats.lane_general, self.stats.lane_listed)
         limit = (lambda n: self.wave_limit(n, film, sweeps)) if deadline and self.time is not None else None
         total = source.count(ctx, spp) if wave is None else spp * ctx.n_pixels
         loop = ctx.path_loop
@@ -200,8 +201,11 @@ class Session:
     def _end_pass(self, spp, kind, index, tp, total, interrupted=False):
         """Append the pass's entry to self.passes and advance sample0: by spp, or, for a pass cut at
         the budget's end (out_of_time) or by Ctrl-C, by the whole sweeps over the pixels it made
-        (the entry then has partial and paths, and `interrupted` for Ctrl-C). Returns the entry."""
-        entry = {"spp": spp, "time": _time.perf_counter() - tp, "kind": kind, "film": index}
+        (the entry then has partial and paths, and `interrupted` for Ctrl-C). The entry also counts
+        the vertices the lanes' general and listed kernels shaded in the pass. Returns the entry."""
+        entry = {"spp": spp, "time": _time.perf_counter() - tp, "kind": kind, "film": index,
+                 "lane_general_vertices": int(self.stats.lane_general - self._pass_lanes[0]),
+                 "lane_listed_vertices": int(self.stats.lane_listed - self._pass_lanes[1])}
         if self._pass_paths < total:
             entry.update(partial=True, paths=self._pass_paths)
             if interrupted:

@@ -172,25 +172,44 @@ def test_camera_that_sees_no_surface(tmp_path, guide):
     np.testing.assert_allclose(r.image, 0.7, rtol=1e-6)
 
 
-def test_records_carry_the_incident_radiance(tmp_path):
+# the loops that record: the wavefront's shade, the lanes' listed kernel (the closed box is diffuse),
+# the lanes' general kernel (every triangle's class made general)
+RECORDING_LOOPS = ("wave", "lanes", "lanes-general")
+
+
+def _recorded(ctx, loop, n, **kw):
+    """The Records of one wave of n camera paths traced on `loop` (RECORDING_LOOPS), checking that
+    the lanes' kernel named traced them where asked."""
+    from tracer.engine import lanes
+    from tracer.film import Film
+
+    ctx.path_loop = loop.split("-")[0]
+    if loop == "lanes-general":
+        lanes._lane_scene(ctx).tl[lanes.TL_FAST] = lanes.GENERAL
+    got, stats = [], Stats()
+    trace_wave(ctx, WaveBuffers(n), CameraSource(), Film(16, 16), 0, 0, n, stats, observe=got.append, **kw)
+    on_lanes = loop != "wave"
+    assert stats.lane_samples == (n if on_lanes else 0)
+    assert (stats.lane_listed > 0) == (loop == "lanes") and (stats.lane_general > 0) == (loop == "lanes-general")
+    return got[0]
+
+
+@pytest.mark.parametrize("loop", RECORDING_LOOPS)
+def test_records_carry_the_incident_radiance(tmp_path, loop):
     # In a closed box whose walls all emit Le and reflect a, the radiance arriving along any
     # direction is Le / (1 - a). The first vertex's record of every path must estimate exactly
-    # that (its own NEE excluded: with it the mean would be larger).
+    # that (its own NEE excluded: with it the mean would be larger), on either loop that records.
     a, le = 0.5, 1.0
     scene = tracer.load_scene(scenes.closed_box(tmp_path, a, le, width=16, height=16))
     from tracer.context import RenderContext
     from tracer.bvh import make_accel
-    from tracer.film import Film
     from tracer.lights import build_lights
 
     ctx = RenderContext(scene, make_accel("embree", scene.tri), build_lights(scene), 5, -1, 3, "box", (0, 0, 16, 16))
     n = 16 * 16 * 64
     # direct=True: the full incident radiance; direct=False: less the emission hit directly
     for direct, expected in ((True, le / (1 - a)), (False, le * a / (1 - a))):
-        got = []
-        trace_wave(ctx, WaveBuffers(n), CameraSource(), Film(16, 16), 0, 0, n, Stats(), observe=lambda rec: got.append(rec),
-                   direct=direct)
-        rec = got[0]
+        rec = _recorded(ctx, loop, n, direct=direct)
         first = rec.radiance[:n][rec.strategy[:n] >= 0].astype(np.float64)
         assert first.size > 0.9 * n
         assert (rec.strategy[:n] <= 0).all()  # no guide: BSDF only
@@ -198,9 +217,10 @@ def test_records_carry_the_incident_radiance(tmp_path):
                  what=f"recorded radiance (direct={direct})")
 
 
+@pytest.mark.parametrize("loop", RECORDING_LOOPS)
 @pytest.mark.parametrize("roulette,records", [("path", "survivors"), ("path", "unbiased"), ("late", "survivors"),
                                               ("reference", "survivors")])
-def test_records_past_the_roulette(tmp_path, roulette, records):
+def test_records_past_the_roulette(tmp_path, roulette, records, loop):
     """In the closed box of test_records_carry_the_incident_radiance every record, at any depth,
     estimates Le / (1 - a), unless the roulette starves it: with `records` survivors and the
     roulette drawn before the ray (roulette path), a record whose path is killed reads 0 and a
@@ -210,7 +230,6 @@ def test_records_past_the_roulette(tmp_path, roulette, records):
     roulette or record that lost the 1 / q, or the late roulette's emission, would show here."""
     from tracer.bvh import make_accel
     from tracer.context import RenderContext
-    from tracer.film import Film
     from tracer.guiding.base import Guide
     from tracer.guiding.contract import empty_state
     from tracer.lights import build_lights
@@ -222,9 +241,7 @@ def test_records_past_the_roulette(tmp_path, roulette, records):
     g.roulette_settings({"roulette": roulette, "records": records})
     ctx.guide_state = g.with_roulette(empty_state(), False)
     n = 16 * 16 * 64
-    got = []
-    trace_wave(ctx, WaveBuffers(n), CameraSource(), Film(16, 16), 0, 0, n, Stats(), observe=lambda rec: got.append(rec))
-    rec = got[0]
+    rec = _recorded(ctx, loop, n)
     x = rec.radiance[rec.strategy >= 0].astype(np.float64)
     assert x.size > 2 * n  # paths past rr_depth are recorded
     expected = le / (1 - a)
@@ -335,20 +352,18 @@ def test_maps_per_side_keep_guided_directions_above_the_surface():
     assert six < 0.05 and six < one / 3, (one, six)
 
 
-def test_records_link_each_vertex_to_the_one_before(tmp_path):
+@pytest.mark.parametrize("loop", RECORDING_LOOPS)
+def test_records_link_each_vertex_to_the_one_before(tmp_path, loop):
     # Record r's prev is the record of the same path's previous vertex: the direction sampled
     # there points at r's position. First hits have none.
     scene = tracer.load_scene(scenes.closed_box(tmp_path, 0.5, 1.0, width=16, height=16))
     from tracer.bvh import make_accel
-    from tracer.film import Film
     from tracer.lights import build_lights
     from tracer.context import RenderContext
 
     ctx = RenderContext(scene, make_accel("embree", scene.tri), build_lights(scene), 5, -1, 3, "box", (0, 0, 16, 16))
     n = 16 * 16 * 8
-    got = []
-    trace_wave(ctx, WaveBuffers(n), CameraSource(), Film(16, 16), 0, 0, n, Stats(), observe=lambda rec: got.append(rec))
-    rec = got[0]
+    rec = _recorded(ctx, loop, n)
     r = np.flatnonzero(rec.strategy >= 0)
     p = rec.prev[r]
     first = p < 0

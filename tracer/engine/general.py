@@ -6,20 +6,26 @@ import numpy as np
 from numba import prange
 
 from .._jit import kernel
-from .rows import (ALIVE, BR, DELTA, DEPTH, DX, DY, DZ, OX, PDF, SDX, SHADOW, SLOT, SOX, SR, TMAX)
+from ..guiding.records import RECORD_NONE, record_vertex
+from .rows import ALIVE, BR, DELTA, DEPTH, DX, DY, DZ, LR, OX, PDF, SDX, SHADOW, SLOT, SOX, SR, TMAX
 from .vertex import shade_vertex
 
 @kernel
-def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, ps, limits, state):
+def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, ps, limits, state, rec):
     """Shade the vertex of each lane general[0 .. ] (classify's list) with engine.vertex.shade_vertex
     in float64, on the wave's PathState `state` (its path slot's row, loaded from the lane first:
     throughput, depth, the last direction's density and delta flag), and write back into the lane
     what the fast kernel writes: the next ray, the throughput, depth, density and delta flag after
     it, flags[ALIVE], the shadow ray (flags[SHADOW], its value with the throughput in). The
-    emission it finds goes into the slot's radiance directly. limits: (max_depth, rr_depth, nee)."""
+    emission it finds goes into the slot's radiance directly. limits: (max_depth, rr_depth, nee,
+    record, rec_base). With `record` (guiding.records' RECORD_ALL or RECORD_INDIRECT), lane k's vertex
+    is record rec_base + k of the guiding.records.Records `rec` (record_vertex); the lane's radiance
+    so far moves into the slot's first, so that the record's L0 holds all of it."""
     max_depth = limits[0]
     rr_depth = limits[1]
     nee = limits[2]
+    record = limits[3]
+    rec_base = limits[4]
     beta = state.beta
     L = state.L
     L_cam = state.L_cam
@@ -31,9 +37,30 @@ def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, p
     pix = state.pix
     aov = state.aov
     aov_open = state.aov_open
+    prev_rec = state.prev_rec
+    r_x = rec.x
+    r_n = rec.n
+    r_wi = rec.wi
+    r_pdf = rec.pdf
+    r_fcos = rec.fcos
+    r_strategy = rec.strategy
+    r_node = rec.node
+    r_path = rec.path
+    r_pixel = rec.pixel
+    r_L0 = rec.L0
+    r_beta = rec.beta
+    r_pb = rec.pb
+    r_prev = rec.prev
+    r_direct = rec.direct
+    r_plight = rec.plight
     for j in prange(general.shape[0]):
         k = general[j]
         i = li[SLOT, k]
+        if record != RECORD_NONE:
+            r_strategy[rec_base + k] = -1
+            for q in range(3):
+                L[i, q] += lf[LR + q, k]
+                lf[LR + q, k] = 0.0
         for q in range(3):
             beta[i, q] = lf[BR + q, k]
         depth[i] = li[DEPTH, k]
@@ -59,5 +86,8 @@ def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, p
                 sh[SDX + q, k] = v.sh_d[q]
                 sh[SR + q, k] = v.sh_L[q]
             sh[TMAX, k] = v.sh_tmax
+        if record != RECORD_NONE:
+            record_vertex(v, i, rec_base + k, record, prev_rec, pix, L, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy,
+                          r_node, r_path, r_pixel, r_L0, r_beta, r_pb, r_prev, r_direct, r_plight)
 
 

@@ -36,10 +36,12 @@ dimension (tracer.rng's layout of a bounce's dimensions), the general kernel fro
 as the other path loops do: the images agree with theirs in expectation, not bit for bit
 (tests/test_engine.py z-tests them).
 
-What a wave needs to run here (`usable`): Embree, and a pass that neither records nor takes
-external primary samples. A guide's final passes run here too: under its maps, its roulette or
-its splitting (`fast_allowed`) the diffuse lanes go to the listed kernel with the glossy ones,
-which samples the guide's mixture; the general lanes to the general kernel, which does too.
+What a wave needs to run here (`usable`): Embree, and a pass that takes no external primary
+samples. A guide's final passes run here too: under its maps, its roulette or its splitting
+(`fast_allowed`) the diffuse lanes go to the listed kernel with the glossy ones, which samples
+the guide's mixture; the general lanes to the general kernel, which does too. So do its passes
+that record: the listed and general kernels write each vertex's record as the wavefront does
+(guiding.records), and `occlude` adds a vertex's own NEE to its record's L0.
 """
 import math
 import time
@@ -51,6 +53,7 @@ from .._jit import jit, kernel
 from ..bsdfs import COATED, DIFFUSE, METAL, ONE_SIDED, P_CLEAR, P_FLAGS, P_KD, P_KS
 from ..bvh.embree import _INTERSECT16, _LANES, _OCCLUDED16, _VALID, call4
 from ..bvh.numba_bvh import _NumbaThreads
+from ..guiding.records import RECORD_NONE
 from ..lights import ENV_NONE
 from ..rng import no_primary_samples
 from ..material import TEX_BITMAP, TEX_CONSTANT, TEX_SLOT_BUMP, TEX_SLOT_KD, TEX_SLOT_KS, TEX_SLOT_OPACITY
@@ -227,10 +230,10 @@ def fast_triangles(scene, lights):
 
 
 def usable(ctx, record, ps):
-    """Whether a wave can run on the lanes: render(path_loop="lanes"), Embree, no records, no
-    primary samples. (A guide's maps and roulette are the listed and general kernels', fast_allowed;
-    its splitting is split_lanes'.)"""
-    if ctx.path_loop != "lanes" or ctx.accel.name != "embree" or record:
+    """Whether a wave can run on the lanes: render(path_loop="lanes"), Embree, no primary samples.
+    (A guide's maps and roulette are the listed and general kernels', fast_allowed; its splitting
+    is split_lanes'; its records, with `record`, the listed and general kernels'.)"""
+    if ctx.path_loop != "lanes" or ctx.accel.name != "embree":
         return False
     return ps is None or not np.any(ps.col >= 0)
 
@@ -239,6 +242,11 @@ def _limits(ctx, ls):
     """The class kernels' `lim` (int32, rows L_*): rr_depth, max_depth, nee, the emissive triangles'
     count, whether the scene has corner normals."""
     return np.array([ctx.rr_depth, ctx.max_depth, int(ctx.nee), ls.n_lights, int(ls.smooth)], np.int32)
+
+
+def _general_limits(ctx, record, rec_base):
+    """The general kernel's `limits`: (max_depth, rr_depth, nee, record mode, first record)."""
+    return int(ctx.max_depth), int(ctx.rr_depth), bool(ctx.nee), int(record), int(rec_base)
 
 
 def class_kernels(ctx, guided):
@@ -285,12 +293,13 @@ def warm_up(ctx, buf, names, split=None):
         shade(lf, li, 0, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.tl, lanes.kd, ls.alias_t,
               ls.alias_i, lim)
     if "listed.shade_listed" in names:
-        shade_listed(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :0], ls.geo, ls.tl, lanes.kd,
-                     (ls.alias_t, ls.alias_i), lim, ctx.surfaces, state, ctx.guide_state, ctx.accel.centre)
+        shade_listed(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :0], (ls.geo, ls.tl, lanes.kd),
+                     (ls.alias_t, ls.alias_i), lim, ctx.surfaces, state, ctx.guide_state, ctx.accel.centre,
+                     buf.records, (0, 0))
     if "general.shade_general" in names:
         shade_general(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[0, :0], ctx.accel.centre,
-                      ctx.surfaces, ctx.lights, ctx.guide_state, no_primary_samples(),
-                      (ctx.max_depth, ctx.rr_depth, ctx.nee), state)
+                      ctx.surfaces, ctx.lights, ctx.guide_state, no_primary_samples(), _general_limits(ctx, 0, 0),
+                      state, buf.records)
     if split is not None:
         split_lanes(lf, li, 0, lanes.hit, lanes.prim, ctx.surfaces.tri, ctx.tri_normal, state, ctx.guide_state, split,
                     lanes.ks, buf.parent, 0, buf.capacity)
@@ -795,10 +804,12 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_t, alia
 
 
 @kernel
-def occlude(fn, scene, scratch, n, sh, flags, lf):
+def occlude(fn, scene, scratch, n, sh, flags, lf, r_L0, rec_base):
     """Trace the shadow rays of lanes 0 .. n-1 that have one, 16 to one rtcOccluded16 (fn: each
     chunk of lanes fills its packets with the next 16 it finds), and add the value of each
-    unblocked one to its lane's radiance. Returns how many were traced."""
+    unblocked one to its lane's radiance, and where rec_base >= 0 to the L0 of lane k's record
+    rec_base + k too (r_L0: guiding.records.Records.L0), so that the radiance recorded along the
+    vertex's sampled direction leaves out the vertex's own NEE. Returns how many were traced."""
     L = _LANES
     nch = scratch.shape[0]
     traced = 0
@@ -824,6 +835,10 @@ def occlude(fn, scene, scratch, n, sh, flags, lf):
                         lf[LR, j] += sh[SR, j]
                         lf[LG, j] += sh[SG, j]
                         lf[LB, j] += sh[SB, j]
+                        if rec_base >= 0:
+                            r_L0[rec_base + j, 0] += sh[SR, j]
+                            r_L0[rec_base + j, 1] += sh[SG, j]
+                            r_L0[rec_base + j, 2] += sh[SB, j]
                 traced += f
                 f = 0
     return traced
@@ -889,13 +904,18 @@ def compact(lf, li, n, flags, L, hole, mover):
     return m
 
 
-def run(ctx, buf, n, ps, stats, split=None):
+def run(ctx, buf, n, ps, stats, split=None, record=RECORD_NONE):
     """Trace the n paths the source started in `buf` (wave.WaveBuffers; ps: the source's
     rng.PrimarySamples, supplying none) to their end on the lanes: each path's radiance into
     buf.L, its AOVs and L_cam, as the other path loops leave them; split: a splitting.SplitPlan
-    (buf made with split=True) or None. stats.trace_parts gets the seconds of the ray queries, the
-    shading (both classes) and the rest; stats.lane_samples the paths, stats.lane_general the
-    vertices the general kernel shaded, stats.lane_listed the listed kernel's."""
+    (buf made with split=True) or None. With `record` (guiding.records' RECORD_ALL or
+    RECORD_INDIRECT; not with split) the diffuse lanes go to the listed kernel with the glossy
+    ones, and the listed and general kernels write the records into buf.records (grown as needed),
+    a bounce's m lanes taking m entries as the wavefront's m paths do; returns how many entries
+    were used (0 without records).
+    stats.trace_parts gets the seconds of the ray queries, the shading (both classes) and the rest;
+    stats.lane_samples the paths, stats.lane_general the vertices the general kernel shaded,
+    stats.lane_listed the listed kernel's."""
     t0 = time.perf_counter()
     ls = _lane_scene(ctx)
     lanes = getattr(buf, "_lanes", None)
@@ -904,11 +924,12 @@ def run(ctx, buf, n, ps, stats, split=None):
     accel = ctx.accel
     scene, _, centre, _, scratch = accel.packet_args()
     lim = _limits(ctx, ls)
-    limits = (ctx.max_depth, ctx.rr_depth, ctx.nee)
     state = buf.path_state(n)
-    splitting = split is not None and buf.capacity > buf.size
-    # the fast kernel leaves the PathState behind, which split_lanes reads
-    use_fast = fast_allowed(ctx.guide_state) and not splitting
+    splitting = split is not None and buf.capacity > buf.size and record == RECORD_NONE
+    # the fast kernel leaves the PathState behind, which split_lanes reads, and writes no records
+    use_fast = fast_allowed(ctx.guide_state) and not splitting and record == RECORD_NONE
+    rec = buf.records
+    n_rec = 0
     n_slots = n
     rays = shadows = general = listed = ended = 0
     surf = ctx.surfaces
@@ -936,6 +957,8 @@ def run(ctx, buf, n, ps, stats, split=None):
                 t = clock()
                 part["rest"] += t - t2
                 t2 = t
+            if record != RECORD_NONE and n_rec + m > rec.strategy.shape[0]:
+                rec = buf.records = rec.grown(max(2 * rec.strategy.shape[0], n_rec + m, 4 * n), n_rec)
             ng = nc = 0
             classified = first or not (ls.all_fast and use_fast)
             if classified:  # else only the camera rays' hits (AOVs) need it
@@ -949,18 +972,23 @@ def run(ctx, buf, n, ps, stats, split=None):
                     shade(lf, li, m, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.fast, ls.geo, ls.tl, lanes.kd,
                           ls.alias_t, ls.alias_i, lim)
                 if nc:
-                    shade_listed(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :nc], ls.geo, ls.tl,
-                                 lanes.kd, (ls.alias_t, ls.alias_i), lim, surf, state, ctx.guide_state, centre)
+                    shade_listed(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[1, :nc],
+                                 (ls.geo, ls.tl, lanes.kd), (ls.alias_t, ls.alias_i), lim, surf, state,
+                                 ctx.guide_state, centre, rec, (record, n_rec))
                     listed += nc
                 if classified:
                     albedo_aov(li, m, lanes.kd, lanes.prim, lanes.fast, state)
             if ng:
                 shade_general(lf, li, lanes.hit, lanes.prim, lanes.shadow, flags, lanes.lists[0, :ng], centre,
-                              surf, ctx.lights, ctx.guide_state, ps, limits, state)
+                              surf, ctx.lights, ctx.guide_state, ps,
+                              _general_limits(ctx, record, n_rec), state, rec)
                 general += ng
             t3 = clock()
             part["shade"] += t3 - t2
-            shadows += occlude(_OCCLUDED16, scene, scratch, m, lanes.shadow, flags, lf)
+            shadows += occlude(_OCCLUDED16, scene, scratch, m, lanes.shadow, flags, lf, rec.L0,
+                               n_rec if record != RECORD_NONE else -1)
+            if record != RECORD_NONE:
+                n_rec += m
             t = clock()
             part["occluded"] += t - t3
             m = int(compact(lf, li, m, flags, buf.L, lanes.hole, lanes.mover))
@@ -977,3 +1005,4 @@ def run(ctx, buf, n, ps, stats, split=None):
     for name, sec in part.items():
         stats.trace_parts[name] += sec
     stats.tick("trace", t0)
+    return n_rec

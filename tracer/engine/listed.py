@@ -30,13 +30,14 @@ from numba import prange
 
 from .._jit import jit, kernel
 from ..bsdfs import (COATED, DIFFUSE, METAL, ONE_SIDED, _coated_eval_pdf, _coated_sample, _diffuse_eval, _diffuse_pdf,
-                     _diffuse_sample, _metal_eval_pdf, _metal_f, _metal_sample)
+                     _diffuse_sample, _metal_eval_pdf, _metal_f, _metal_sample, lum)
 from ..guiding.contract import locate, slot_sample
+from ..guiding.records import RECORD_NONE, record_emission, record_sampled
 from ..material import _unit_toward
 from ..sampling import dot, frame, to_local, to_world
 from ..shading import BLACK, bsdf_in_mixture, guided_weight, mixture_pdf, offset_point, survival
 from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, G_N, G_VN, H_T, KEY, L_LIGHTS, L_MAX, L_NEE, L_RR,
-                   L_SMOOTH, LR, OX, OY, OZ, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SLOT, SOX, SOY, SOZ, SR,
+                   L_SMOOTH, LB, LG, LR, OX, OY, OZ, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SLOT, SOX, SOY, SOZ, SR,
                    TL_AREA, TL_EMIT, TL_EPS, TL_SEL, TMAX)
 from .sampling32 import (BLOCK, BOUNCE, D_COIN, D_DIR, D_LIGHT, D_LOBE, D_POS, D_RR, SHORT, alias_column, hash32,
                          rand32, strategy_dim)
@@ -76,7 +77,7 @@ def _sample(kind, prm, table, wo, u0, u1, ul):
 
 
 @kernel
-def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, surf, state, gs, centre):
+def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, state, gs, centre, rec, rec_at):
     """Shade the vertex of each lane listed[0 ..] (classify's list; its triangle's material, DIFFUSE,
     COATED or METAL, from the material.Surfaces `surf`, its parameters with the colour kd[:, lane]
     in place of its reflectance (DIFFUSE, COATED) or specular reflectance (METAL); an escape ends
@@ -84,8 +85,13 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
     wave's PathState `state` where aov_open, the NEE sample into the shadow rows (flags[SHADOW]),
     the sampled next ray, throughput, density, delta flag and depth into the lane and the state
     (with the gain: split_lanes reads them there), the roulette into flags[ALIVE]. The guide's
-    GuideState gs (positions: the lanes' plus centre); the scene's rows (geo, tl, alias = (alias_t,
-    alias_i)) and lim as lanes.shade takes them."""
+    GuideState gs (positions: the lanes' plus centre); rows = (geo, tl, kd) and alias = (alias_t,
+    alias_i) the rows lanes.shade takes, and lim. rec_at = (record, rec_base): with `record`
+    (guiding.records' RECORD_ALL or RECORD_INDIRECT) lane k's vertex is record rec_base + k of the
+    guiding.records.Records `rec`, written as the wavefront writes it (record_emission,
+    record_sampled; L0 the slot's radiance in the PathState plus the lane's)."""
+    geo, tl, kd = rows
+    record, rec_base = rec_at
     rr_depth = lim[L_RR]
     max_depth = lim[L_MAX]
     nee = lim[L_NEE] != 0
@@ -102,6 +108,23 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
     prev_pdf = state.prev_pdf
     prev_delta = state.prev_delta
     pix = state.pix
+    L = state.L
+    prev_rec = state.prev_rec
+    r_x = rec.x
+    r_n = rec.n
+    r_wi = rec.wi
+    r_pdf = rec.pdf
+    r_fcos = rec.fcos
+    r_strategy = rec.strategy
+    r_node = rec.node
+    r_path = rec.path
+    r_pixel = rec.pixel
+    r_L0 = rec.L0
+    r_beta = rec.beta
+    r_pb = rec.pb
+    r_prev = rec.prev
+    r_direct = rec.direct
+    r_plight = rec.plight
     material = surf.material
     mat_type = surf.mat_type
     mat_param = surf.mat_param
@@ -111,6 +134,8 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
         p = prim[k]
         flags[SHADOW, k] = np.int32(0)
         flags[ALIVE, k] = np.int32(0)
+        if record != RECORD_NONE:
+            r_strategy[rec_base + k] = -1
         if p < 0:  # an escape with no environment: the path ends
             continue
         i = li[SLOT, k]
@@ -138,6 +163,9 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
                 we = pp / (pp + pl * pl)
             for c in range(3):
                 lf[LR + c, k] += bt[c] * tl[TL_EMIT + c, p] * we
+            if record != RECORD_NONE and prev_rec[i] >= 0:
+                le = (np.float64(tl[TL_EMIT, p]), np.float64(tl[TL_EMIT + 1, p]), np.float64(tl[TL_EMIT + 2, p]))
+                record_emission(prev_rec[i], record, bt, le, we, np.float64(lf[PDF, k]), r_L0, r_direct, r_plight)
 
         ns = corner_normal(geo, p, b1, b2)
         s, t = frame(ns)
@@ -170,11 +198,13 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
                 bt = (bt[0] / qa, bt[1] / qa, bt[2] / qa)
 
         # the guide's map and the probability a of sampling the BSDF
+        node = -1
         slot = -1
         a = 1.0
+        nf = ng if cos_o >= 0.0 else (-ng[0], -ng[1], -ng[2])
+        xw = (x[0] + centre[0], x[1] + centre[1], x[2] + centre[2])
         if on and guided and not smooth_metal:
-            nf = ng if cos_o >= 0.0 else (-ng[0], -ng[1], -ng[2])
-            _, slot, a = locate(gs, (x[0] + centre[0], x[1] + centre[1], x[2] + centre[2]), nf, pix[i], dk)
+            node, slot, a = locate(gs, xw, nf, pix[i], dk)
 
         # a light sample: an emissive triangle from the alias table, a point uniform on it, MIS
         # against the mixture's density of that direction
@@ -226,26 +256,35 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, geo, tl, kd, alias, lim, 
         # D_LOBE); its weight with the mixture's density; then the roulette
         u0 = np.float64(rand32(key, base + D_DIR))
         u1 = np.float64(rand32(key, base + D_DIR + 1))
+        strategy = 0
         if a < 1.0 and np.float64(rand32(key, strategy_dim(dk))) >= a:
             wiw, pg = slot_sample(gs, slot, u0, u1)
             wi = to_local(wiw, s, t, ns)
             f, pbs = _eval_pdf(kind, prm, table, wo, wi)
             wt, pdf, ratio = guided_weight(f, pbs, pg, a)
             dlt = False
+            strategy = 1
         else:
-            wi, wt, pdf, dlt = _sample(kind, prm, table, wo, u0, u1, np.float64(rand32(key, base + D_LOBE)))
+            wi, wt, pbs, dlt = _sample(kind, prm, table, wo, u0, u1, np.float64(rand32(key, base + D_LOBE)))
             wiw = to_world(wi, s, t, ns)
-            wt, pdf, ratio = bsdf_in_mixture(gs, slot, a, wiw, wt, pdf, dlt)
+            wt, pdf, ratio = bsdf_in_mixture(gs, slot, a, wiw, wt, pbs, dlt)
         if smooth and ((wo[2] * wi[2] > 0.0) != (cos_o * dot(wiw, ng) > 0.0)):
             wt = BLACK
         gn = gn * ratio
         nb = (bt[0] * wt[0], bt[1] * wt[1], bt[2] * wt[2])
         bmax = max(nb[0], max(nb[1], nb[2]))
         go = bmax > 0.0 and math.isfinite(bmax) and dk + 1 < MAX_BOUNCES
+        pre = nb  # before the roulette: a record's throughput with gs.rec_q
         if go and dk + 1 >= rr_depth and gs.rr_late == 0:
             qb = survival(nb, gn, gs)
             go = np.float64(rand32(key, base + D_RR)) < qb
             nb = (nb[0] / qb, nb[1] / qb, nb[2] / qb)
+        if record != RECORD_NONE:
+            rb = pre if gs.rec_q != 0 else (nb if go else BLACK)
+            L0 = (L[i, 0] + lf[LR, k], L[i, 1] + lf[LG, k], L[i, 2] + lf[LB, k])
+            record_sampled(i, rec_base + k, (not smooth_metal and not dlt and pdf > 0.0, xw, nf, wiw, strategy, node,
+                                             pdf, pbs, lum(wt) * pdf, rb, L0), prev_rec, pix, r_x, r_n, r_wi, r_pdf,
+                           r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0, r_beta, r_pb, r_prev, r_direct, r_plight)
         if go:
             o = offset_point(x, ng, wiw, eps)
             lf[OX, k] = o[0]

@@ -46,6 +46,7 @@ class AutoGuide(Guide):
 
     name = "auto"
     learns = True
+    records_loop = "wave"
     DEFAULTS = {"candidates": "+".join(CANDIDATES), "trial_iterations": 2, "trials_in_image": 0}
 
     def __init__(self, **settings):
@@ -227,9 +228,9 @@ class AutoGuide(Guide):
     def _trial_pass(self, session, film, spp, g):
         """Run one trial pass of candidate g (None: bsdf) into film; returns {spp, time}: the pass's
         seconds without the time the guide spent observing its records. Every trial runs on the
-        wavefront (a guide's records need it), bsdf's too, so their speeds compare."""
+        wavefront (records_loop), bsdf's too, so that their speeds compare on one loop."""
         self._observed = 0.0
-        session.run_pass(film, spp, "trial", learn=g is not None, path_loop="wave")
+        session.run_pass(film, spp, "trial", learn=g is not None, path_loop=self.records_loop)
         e = session.passes[-1]
         return {"spp": e["spp"], "time": max(e["time"] - self._observed, 1e-9),
                 "time_update": e.get("time_update", 0.0)}

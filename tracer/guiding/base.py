@@ -95,6 +95,7 @@ class Guide:
 
     training_in_image = True  # Algorithm 1's image weighs the training iterations in (False: final passes alone)
     roulette = "path"  # ROULETTES
+    records_loop = None  # the path loop its recording passes take (None: the render's; "wave": the wavefront)
     records = "survivors"  # RECORD_KINDS
     roulette_used = "path"  # the roulette of this render ("auto" resolved by resolve_roulette)
 

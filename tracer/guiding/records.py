@@ -1,9 +1,10 @@
 """Path vertices recorded for guides that learn, and the radiance that came back along them.
 
 With recording on, the shading kernel writes one record per surface vertex where a direction was
-sampled (tracer.integrator.shade); once the path has ended, `finalize_records` turns what the path
-gathered after the vertex into the radiance along the vertex's direction. A guide receives the
-records of each wave in `observe(records)`.
+sampled (`record_vertex`, from the wavefront's shade in tracer.integrators.path and the lanes'
+general kernel; `record_emission` and `record_sampled`, from the lanes' listed kernel); once the path has ended, `finalize_records` turns what the path gathered after
+the vertex into the radiance along the vertex's direction. A guide receives the records of each
+wave in `observe(records)`.
 """
 import math
 from typing import NamedTuple
@@ -11,7 +12,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import prange
 
-from .._jit import kernel
+from .._jit import jit, kernel
+from ..bsdfs import lum
+
+RECORD_NONE = 0  # a bounce's record mode: no records
+RECORD_ALL = 1  # records of the full incident radiance
+RECORD_INDIRECT = 2  # records of the radiance less the emission the direction hits directly (NEE's part)
 
 
 class Records(NamedTuple):
@@ -70,3 +76,64 @@ def finalize_records(strategy, path, beta, L0, radiance, L):
             if b > 0.0:
                 v += (0.2126, 0.7152, 0.0722)[c] * (L[i, c] - L0[r, c]) / b
         radiance[r] = v if (v > 0.0 and math.isfinite(v)) else 0.0
+@jit(inline="always")
+def record_emission(r, record, b, le, w, pdf, r_L0, r_direct, r_plight):
+    """Emission le (MIS weight w) found along the direction of record r, sampled with density pdf,
+    by a path of throughput b: RECORD_ALL counts it in full in the record's radiance,
+    RECORD_INDIRECT not at all (its L0 takes what L gained); either way the record keeps its
+    luminance (`direct`) and next-event estimation's density of it (`plight`, from the power
+    heuristic's weight: w = pdf^2 / (pdf^2 + plight^2))."""
+    x_le = -(1.0 - w) if record == RECORD_ALL else w
+    for c in range(3):
+        r_L0[r, c] += b[c] * le[c] * x_le
+    r_direct[r] += lum(le)
+    if w > 0.0:
+        r_plight[r] = pdf * math.sqrt(max(1.0 - w, 0.0) / w)
+    else:
+        r_plight[r] = np.inf
+
+
+@jit(inline="always")
+def record_sampled(i, r, vx, prev_rec, pix, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0,
+                   r_beta, r_pb, r_prev, r_direct, r_plight):
+    """Path slot i sampled a direction at its vertex, shaded as record r: vx = (recorded, x, nf, wi,
+    strategy, node, pdf_mix, pdf_bsdf, fcos, beta, L0) (engine.vertex.Vertex's fields of those
+    names; L0 the path's radiance so far, the vertex's emission in, its NEE not). Where `recorded`
+    (not a delta vertex) the vertex becomes record r and the path's last, else the path has none.
+    The r_* arrays are Records' fields, passed one by one: a parallel loop loses writes made
+    through the NamedTuple (tests/test_seams.py)."""
+    last = prev_rec[i]
+    prev_rec[i] = -1
+    if vx[0]:
+        r_prev[r] = last
+        prev_rec[i] = r
+        r_strategy[r] = vx[4]
+        r_node[r] = vx[5]
+        r_path[r] = i
+        r_pixel[r] = pix[i]
+        r_pdf[r] = vx[6]
+        r_pb[r] = vx[7]
+        r_fcos[r] = vx[8]
+        r_direct[r] = 0.0
+        r_plight[r] = 0.0
+        for c in range(3):
+            r_x[r, c] = vx[1][c]
+            r_n[r, c] = vx[2][c]
+            r_wi[r, c] = vx[3][c]
+            r_L0[r, c] = vx[10][c]
+            r_beta[r, c] = vx[9][c]
+
+
+@jit(inline="always")
+def record_vertex(v, i, r, record, prev_rec, pix, L, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path,
+                  r_pixel, r_L0, r_beta, r_pb, r_prev, r_direct, r_plight):
+    """The records of a bounce (record RECORD_ALL or RECORD_INDIRECT) at the vertex v
+    (engine.vertex.Vertex) that path slot i shaded as record r: the emission v found goes into the
+    record of the path's last vertex (record_emission), then, where v sampled a direction,
+    record_sampled (L0: the path's radiance L[i] so far). The caller sets r_strategy[r] = -1 first."""
+    if v.found and prev_rec[i] >= 0:
+        record_emission(prev_rec[i], record, v.b, v.le, v.w, v.pdf, r_L0, r_direct, r_plight)
+    if v.sampled:
+        record_sampled(i, r, (v.recorded, v.x, v.nf, v.wi, v.strategy, v.node, v.pdf_mix, v.pdf_bsdf, v.fcos, v.beta,
+                              (L[i, 0], L[i, 1], L[i, 2])), prev_rec, pix, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy,
+                       r_node, r_path, r_pixel, r_L0, r_beta, r_pb, r_prev, r_direct, r_plight)

@@ -8,10 +8,11 @@ which go to the accel (Embree or the Numba BVH) in one batch per stage:
     -> shade: emission (MIS), NEE sample, direction from the mixture, record, roulette
     -> compact -> [occluded] -> add NEE -> repeat -> sink (film, or the caller's samples)
 
-A wave that records nothing takes the per-thread path loop instead (tracer.integrators.
+With path_loop="lanes" (the default) a wave goes to the lane engine (tracer.engine.lanes) where
+it can (Embree, no external primary samples; its records from the lanes' general kernel). A wave
+that records nothing takes the per-thread path loop with path_loop="thread" (tracer.integrators.
 thread_loop, Embree only): the same stages per packet of 16 paths inside one kernel. Both shade
 a vertex with `shade_vertex` (tracer.engine.vertex), so their images are the same bit for bit.
-With path_loop="lanes" such a wave goes to the lane engine (tracer.engine.lanes) where it can.
 
 The steps of `shade_vertex` are the helpers of tracer.shading; its random numbers go through the sample
 seam `rng.draw` (the stream, or a source's external primary samples). With a guide, a non-delta
@@ -33,17 +34,15 @@ before the sampled ray is traced. A guide may set another (GuideState.rr_late, r
 Practical Path Guiding's reference draws it after the ray, once the emission it hits is counted,
 so that a vertex's record always holds that emission) and records of X / q (rec_q).
 """
-import math
 import time
 
 import numpy as np
 from numba import prange
 
-from .._jit import jit, kernel
-from ..bsdfs import lum
+from .._jit import kernel
 from ..engine.vertex import MAX_BOUNCES, shade_vertex
 from ..film import aovs_of, combine_films
-from ..guiding.records import finalize_records
+from ..guiding.records import RECORD_ALL, RECORD_INDIRECT, RECORD_NONE, finalize_records, record_vertex
 from ..shading import write_shadow
 from ..splitting import merge_copies, split_wave
 from ..result import RenderResult, report_dark
@@ -53,26 +52,6 @@ from .base import Integrator
 __all__ = ["MAX_BOUNCES", "PathIntegrator", "shade", "trace_wave"]
 
 
-RECORD_NONE = 0  # shade's `record`: no records
-RECORD_ALL = 1  # records of the full incident radiance
-RECORD_INDIRECT = 2  # records of the radiance less the emission the direction hits directly (NEE's part)
-
-
-@jit(inline="always")
-def record_emission(r, record, b, le, w, pdf, r_L0, r_direct, r_plight):
-    """Emission le (MIS weight w) found along the direction of record r, sampled with density pdf,
-    by a path of throughput b: RECORD_ALL counts it in full in the record's radiance,
-    RECORD_INDIRECT not at all (its L0 takes what L gained); either way the record keeps its
-    luminance (`direct`) and next-event estimation's density of it (`plight`, from the power
-    heuristic's weight: w = pdf^2 / (pdf^2 + plight^2))."""
-    x_le = -(1.0 - w) if record == RECORD_ALL else w
-    for c in range(3):
-        r_L0[r, c] += b[c] * le[c] * x_le
-    r_direct[r] += lum(le)
-    if w > 0.0:
-        r_plight[r] = pdf * math.sqrt(max(1.0 - w, 0.0) / w)
-    else:
-        r_plight[r] = np.inf
 
 
 @kernel
@@ -154,35 +133,9 @@ def shade(active, ray_o, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
             for c in range(3):
                 next_o[k, c] = v.next_o[c]
                 next_d[k, c] = v.next_d[c]
-        if record == RECORD_NONE:
-            continue
-        # The records of a guide that learns: emission found along the last vertex's direction,
-        # then this vertex (also when the path ends here: its radiance is 0)
-        if v.found and prev_rec[i] >= 0:
-            record_emission(prev_rec[i], record, v.b, v.le, v.w, v.pdf, r_L0, r_direct, r_plight)
-        if not v.sampled:
-            continue
-        last = prev_rec[i]
-        prev_rec[i] = -1
-        if v.recorded:
-            r = rec_base + k
-            r_prev[r] = last
-            prev_rec[i] = r
-            r_strategy[r] = v.strategy
-            r_node[r] = v.node
-            r_path[r] = i
-            r_pixel[r] = pix[i]
-            r_pdf[r] = v.pdf_mix
-            r_pb[r] = v.pdf_bsdf
-            r_fcos[r] = v.fcos
-            r_direct[r] = 0.0
-            r_plight[r] = 0.0
-            for c in range(3):
-                r_x[r, c] = v.x[c]
-                r_n[r, c] = v.nf[c]
-                r_wi[r, c] = v.wi[c]
-                r_L0[r, c] = L[i, c]
-                r_beta[r, c] = v.beta[c]
+        if record != RECORD_NONE:
+            record_vertex(v, i, rec_base + k, record, prev_rec, pix, L, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy,
+                          r_node, r_path, r_pixel, r_L0, r_beta, r_pb, r_prev, r_direct, r_plight)
 
 
 def warm_up_shadows(ctx):
@@ -222,7 +175,8 @@ def trace_wave(ctx, buf, source, sink, sample0, g0, n, stats, observe=None, dire
     state, out, shadow, queue = buf.path_state(), buf.continuation(), buf.shadow_rays(), buf.shadow_queue()
     t0 = stats.tick("camera", t0)
     if engine is not None and engine.usable(ctx, record, ps):
-        engine.run(ctx, buf, n, ps, stats, split if splitting else None)
+        n_rec = engine.run(ctx, buf, n, ps, stats, split if splitting else None, record)
+        rec = buf.records
         n_active = 0
         t0 = time.perf_counter()
     elif thread_loop is not None and thread_loop.usable(ctx, record):

@@ -251,6 +251,9 @@ class OdisGuide(Guide):
 
     name = "odis"
     learns = False  # the initial pass records vertices, but nothing is learned per scene
+    # the initial pass records on the wavefront: reused in the image, its samples are then a plain
+    # render's with tracer.rng's numbers, bit for bit (tests/guiding/test_odis.py)
+    records_loop = "wave"
     # memory (tracer.memory): the per-pixel sampling tables (32 x 32 uint16 densities and row sums,
     # 2.2 KB), the initial pass's film and samples; bench.memory measured 2662-2791 B/px in all
     # (2380-2570 beyond bsdf's), and 250 MB fixed (torch, the network)
@@ -396,7 +399,8 @@ class OdisGuide(Guide):
                 ctx.max_depth = saved if depth <= 0 else depth if saved < 0 else min(saved, depth)
             self._stats["initial_reused"] = reuse
             try:
-                session.run_pass(film, n0, "initial", learn=True)  # observe, then update builds the maps
+                # observe, then update builds the maps
+                session.run_pass(film, n0, "initial", learn=True, path_loop=self.records_loop)
             finally:
                 ctx.max_depth = saved
             reason = self._stats.get("fallback")
