@@ -73,3 +73,25 @@ def test_no_kernel_compiles_after_the_warm_up(guide, integrator):
     assert lines["LATE"].split() == [], f"compiled inside the passes: {lines['LATE']}"
     lane, total, bad = (int(v) for v in lines["LANES"].split())
     assert 0 < lane <= total and bad == 0, lines["LANES"]
+
+
+def test_the_set_up_seconds_leave_out_numbas_compile():
+    """render's set-up steps (accel, lights, the lanes' tables) count against a time budget, but
+    on a new install their jitted helpers compile there: _set_up returns the step's seconds less
+    the compile inside it, and the compile's seconds. A function compiled inside the step shows as
+    compile (detects the compile counted as set-up); a step that only waits is set-up and nothing
+    else; a second call, compiled already, compiles nothing."""
+    import time
+
+    from numba import njit
+
+    from tracer.render import _set_up
+
+    @njit(cache=False)
+    def f(x):
+        return x * 2.0 + 1.0
+
+    out, t, c = _set_up(lambda: f(1.0))
+    assert out == 3.0 and c > 0.0 and t < 0.5 * c, (t, c)
+    _, t, c = _set_up(lambda: (f(2.0), time.sleep(0.05)))
+    assert c == 0.0 and t >= 0.05

@@ -12,9 +12,11 @@ replaces the base, and a `NUMBA_CACHE_DIR` set by the user is left alone).
 """
 import hashlib
 import os
+from contextlib import contextmanager
 
 import numba
 from numba import njit
+from numba.core import event
 
 
 def _source_digest():
@@ -38,6 +40,20 @@ if not os.environ.get("NUMBA_CACHE_DIR"):
     numba.config.CACHE_DIR = os.path.join(_base, _source_digest())
 
 _OPTIONS = dict(cache=True, nogil=True, error_model="numpy", fastmath=False)
+
+
+@contextmanager
+def compile_clock():
+    """Seconds Numba spends compiling jitted functions, or loading them from its cache, inside the
+    block (a compile inside a compile counted once): yields a one-item list that the block's end
+    sets."""
+    spent = [0.0]
+
+    def done(seconds):
+        spent[0] = seconds
+
+    with event.install_timer("numba:compile", done):
+        yield spent
 
 
 def jit(fn=None, **extra):
