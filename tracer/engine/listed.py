@@ -32,7 +32,7 @@ from .._jit import jit, kernel
 from ..bsdfs import (COATED, DIFFUSE, METAL, ONE_SIDED, _coated_eval_pdf, _coated_sample, _diffuse_eval, _diffuse_pdf,
                      _diffuse_sample, _metal_eval_pdf, _metal_f, _metal_sample, lum)
 from ..guiding.contract import locate, slot_sample
-from ..guiding.records import RECORD_NONE, record_emission, record_sampled
+from ..guiding.records import RECORD_NONE, record_emission, record_sampled, record_vectors
 from ..material import _unit_toward
 from ..sampling import dot, frame, to_local, to_world
 from ..shading import BLACK, bsdf_in_mixture, guided_weight, mixture_pdf, offset_point, survival
@@ -282,9 +282,11 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, s
         if record != RECORD_NONE:
             rb = pre if gs.rec_q != 0 else (nb if go else BLACK)
             L0 = (L[i, 0] + lf[LR, k], L[i, 1] + lf[LG, k], L[i, 2] + lf[LB, k])
-            record_sampled(i, rec_base + k, (not smooth_metal and not dlt and pdf > 0.0, xw, nf, wiw, strategy, node,
-                                             pdf, pbs, lum(wt) * pdf, rb, L0), prev_rec, pix, r_x, r_n, r_wi, r_pdf,
-                           r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0, r_beta, r_pb, r_prev, r_direct, r_plight)
+            vx = (not smooth_metal and not dlt and pdf > 0.0, xw, nf, wiw, strategy, node, pdf, pbs, lum(wt) * pdf, rb,
+                  L0)
+            if record_sampled(i, rec_base + k, vx, prev_rec, pix, r_prev, r_strategy, r_node, r_path, r_pixel, r_pdf,
+                              r_pb, r_fcos, r_direct, r_plight):
+                record_vectors(rec_base + k, vx, r_x, r_n, r_wi, r_L0, r_beta)
         if go:
             o = offset_point(x, ng, wiw, eps)
             lf[OX, k] = o[0]

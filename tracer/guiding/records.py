@@ -1,10 +1,10 @@
 """Path vertices recorded for guides that learn, and the radiance that came back along them.
 
 With recording on, the shading kernel writes one record per surface vertex where a direction was
-sampled (`record_vertex`, from the wavefront's shade in tracer.integrators.path and the lanes'
-general kernel; `record_emission` and `record_sampled`, from the lanes' listed kernel); once the path has ended, `finalize_records` turns what the path gathered after
-the vertex into the radiance along the vertex's direction. A guide receives the records of each
-wave in `observe(records)`.
+sampled (`record_emission`, `record_sampled` and `record_vectors`, from the wavefront's shade in
+tracer.integrators.path and the lanes' listed and general kernels); once the path has ended,
+`finalize_records` turns what the path gathered after the vertex into the radiance along the
+vertex's direction. A guide receives the records of each wave in `observe(records)`.
 """
 import math
 from typing import NamedTuple
@@ -94,14 +94,15 @@ def record_emission(r, record, b, le, w, pdf, r_L0, r_direct, r_plight):
 
 
 @jit(inline="always")
-def record_sampled(i, r, vx, prev_rec, pix, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path, r_pixel, r_L0,
-                   r_beta, r_pb, r_prev, r_direct, r_plight):
+def record_sampled(i, r, vx, prev_rec, pix, r_prev, r_strategy, r_node, r_path, r_pixel, r_pdf, r_pb, r_fcos,
+                   r_direct, r_plight):
     """Path slot i sampled a direction at its vertex, shaded as record r: vx = (recorded, x, nf, wi,
     strategy, node, pdf_mix, pdf_bsdf, fcos, beta, L0) (engine.vertex.Vertex's fields of those
     names; L0 the path's radiance so far, the vertex's emission in, its NEE not). Where `recorded`
-    (not a delta vertex) the vertex becomes record r and the path's last, else the path has none.
-    The r_* arrays are Records' fields, passed one by one: a parallel loop loses writes made
-    through the NamedTuple (tests/test_seams.py)."""
+    (not a delta vertex) the vertex becomes record r and the path's last, its scalars written here
+    and its vectors by record_vectors, which the caller calls where this returns True; else the
+    path has no last record. The r_* arrays are Records' fields, passed one by one: a parallel
+    loop loses writes made through a tuple of arrays (tests/test_seams.py)."""
     last = prev_rec[i]
     prev_rec[i] = -1
     if vx[0]:
@@ -116,24 +117,22 @@ def record_sampled(i, r, vx, prev_rec, pix, r_x, r_n, r_wi, r_pdf, r_fcos, r_str
         r_fcos[r] = vx[8]
         r_direct[r] = 0.0
         r_plight[r] = 0.0
-        for c in range(3):
-            r_x[r, c] = vx[1][c]
-            r_n[r, c] = vx[2][c]
-            r_wi[r, c] = vx[3][c]
-            r_L0[r, c] = vx[10][c]
-            r_beta[r, c] = vx[9][c]
+    return vx[0]
 
 
 @jit(inline="always")
-def record_vertex(v, i, r, record, prev_rec, pix, L, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy, r_node, r_path,
-                  r_pixel, r_L0, r_beta, r_pb, r_prev, r_direct, r_plight):
-    """The records of a bounce (record RECORD_ALL or RECORD_INDIRECT) at the vertex v
-    (engine.vertex.Vertex) that path slot i shaded as record r: the emission v found goes into the
-    record of the path's last vertex (record_emission), then, where v sampled a direction,
-    record_sampled (L0: the path's radiance L[i] so far). The caller sets r_strategy[r] = -1 first."""
-    if v.found and prev_rec[i] >= 0:
-        record_emission(prev_rec[i], record, v.b, v.le, v.w, v.pdf, r_L0, r_direct, r_plight)
-    if v.sampled:
-        record_sampled(i, r, (v.recorded, v.x, v.nf, v.wi, v.strategy, v.node, v.pdf_mix, v.pdf_bsdf, v.fcos, v.beta,
-                              (L[i, 0], L[i, 1], L[i, 2])), prev_rec, pix, r_x, r_n, r_wi, r_pdf, r_fcos, r_strategy,
-                       r_node, r_path, r_pixel, r_L0, r_beta, r_pb, r_prev, r_direct, r_plight)
+def record_vectors(r, vx, r_x, r_n, r_wi, r_L0, r_beta):
+    """The vectors of record r (record_sampled's vx): position, facing normal, direction, L0, beta."""
+    for c in range(3):
+        r_x[r, c] = vx[1][c]
+        r_n[r, c] = vx[2][c]
+        r_wi[r, c] = vx[3][c]
+        r_L0[r, c] = vx[10][c]
+        r_beta[r, c] = vx[9][c]
+
+
+@jit(inline="always")
+def vertex_record(v, L, i):
+    """record_sampled's vx from the engine.vertex.Vertex v of path slot i (L0: its radiance L[i])."""
+    return (v.recorded, v.x, v.nf, v.wi, v.strategy, v.node, v.pdf_mix, v.pdf_bsdf, v.fcos, v.beta,
+            (L[i, 0], L[i, 1], L[i, 2]))
