@@ -28,7 +28,7 @@ OUT = os.path.join(ROOT, "bench", "results", "embree_rate")
 
 
 def capture(name, spp, folder, path_loop="thread"):
-    """Write NAME.hdr (vertex, bounce-ray, shadow-ray counts), .v, .ray (origin, direction) and
+    """Write NAME.hdr (NAME: `label`; vertex, bounce-ray, shadow-ray counts), .v, .ray (origin, direction) and
     .shadow (origin, direction, tmax), float32, coordinates less the accel's centre. With
     path_loop "lanes", the rays the lane engine issues, in its order (capture_lanes)."""
     if path_loop == "lanes":
@@ -58,8 +58,13 @@ def capture(name, spp, folder, path_loop="thread"):
     return _write(folder, name, v, ray, sh)
 
 
+def label(name):
+    """The files' stem in the capture folder for a scene name or path: its last component."""
+    return os.path.basename(name)
+
+
 def _write(folder, name, v, ray, sh):
-    base = os.path.join(folder, name)
+    base = os.path.join(folder, label(name))
     np.array([len(v), len(ray), len(sh), 0], np.int64).tofile(base + ".hdr")
     v.tofile(base + ".v")
     ray.astype(np.float32).tofile(base + ".ray")
@@ -82,20 +87,34 @@ def capture_lanes(name, spp, folder):
         calls["i"].append(np.vstack([lf[OX:OX + 3, :n], lf[DX:DX + 3, :n]]).T.copy())
         return inter(fn, sc, scratch, lf, n, hit, prim)
 
-    def record_o(fn, sc, scratch, n, sh, flags, lf):
+    def record_o(fn, sc, scratch, n, sh, flags, *rest):
         on = flags[SHADOW, :n] != 0
         calls["o"].append(np.vstack([sh[SOX:SOX + 3, :n], sh[SDX:SDX + 3, :n], sh[TMAX:TMAX + 1, :n]]).T[on].copy())
-        return occ(fn, sc, scratch, n, sh, flags, lf)
+        return occ(fn, sc, scratch, n, sh, flags, *rest)
 
     tracer.render(scene, spp=1, max_depth=8, rr_depth=5, path_loop="lanes")
     lanes.intersect, lanes.occlude = record_i, record_o
     try:
-        tracer.render(scene, spp=spp, max_depth=8, rr_depth=5, path_loop="lanes")
+        st = tracer.render(scene, spp=spp, max_depth=8, rr_depth=5, path_loop="lanes").stats
     finally:
         lanes.intersect, lanes.occlude = inter, occ
     c = 0.5 * (scene.bounds[0] + scene.bounds[1])  # the accel's centre (the lanes' rays are relative to it)
     v = (scene.tri - c).astype(np.float32).reshape(-1, 3)
-    return _write(folder, name, v, np.concatenate(calls["i"]), np.concatenate(calls["o"]))
+    # the render's warm-up traces a throwaway path before its passes: the passes' calls are the last ones
+    ray = _last(calls["i"], st["camera_and_bounce_rays"])
+    return _write(folder, name, v, ray, _last(calls["o"], st["shadow_rays"]))
+
+
+def _last(chunks, total):
+    """The rows of the shortest run of chunks at the end of `chunks` that holds `total` rows."""
+    n = 0
+    for j in range(len(chunks) - 1, -1, -1):
+        n += len(chunks[j])
+        if n == total:
+            return np.concatenate(chunks[j:])
+    if total == 0:
+        return np.zeros((0, chunks[0].shape[1] if chunks else 7), np.float32)
+    raise RuntimeError(f"the captured calls hold no run of {total} rays at their end")
 
 
 def build(folder):
@@ -122,7 +141,7 @@ def main(argv=None):
     for name in a.scenes.split(","):
         n, ns = capture(name, a.spp, OUT, a.path_loop)
         print(f"# {name}: {n} closest-hit rays, {ns} shadow rays at {a.spp} spp", flush=True)
-        subprocess.run([exe, OUT, name, str(a.quality)], check=True)
+        subprocess.run([exe, OUT, label(name), str(a.quality)], check=True)
     return 0
 
 

@@ -20,11 +20,11 @@ def available():
     return None
 
 
-def load(spec, spp, max_depth, rr_depth, width=None, height=None):
-    """A mitsuba Scene for a bench.scenes dict."""
+def load(spec, spp, max_depth, rr_depth, width=None, height=None, variant=VARIANT):
+    """A mitsuba Scene for a bench.scenes dict, in `variant`."""
     import mitsuba as mi
 
-    mi.set_variant(VARIANT)
+    mi.set_variant(variant)
     cam = spec["camera"]
     d = {
         "type": "scene",

@@ -76,3 +76,29 @@ def test_worker_renders_in_its_own_process(tmp_path, monkeypatch):
             assert r["stages"]["trace"] > 0 and r["stages"]["intersect"] == 0
     finally:
         w.close()
+
+
+def test_embree_rate_captures_the_lanes_rays(tmp_path, monkeypatch):
+    """bench.embree_rate --path-loop lanes: the capture holds every ray the lane engine traced (as
+    many closest-hit and shadow rays as the same render counts in its stats), unit directions, and
+    origins inside the scene's bounds less the accel's centre. Detects a capture that falls out of
+    step with the kernels' signatures (it wraps lanes.intersect and lanes.occlude), loses rays, or
+    keeps the ray of the render's warm-up path (one closest-hit ray too many)."""
+    from bench import embree_rate
+
+    monkeypatch.setattr(scenes, "FOLDER", str(tmp_path))
+    spec = scenes.open_scene(1)
+    n, ns = embree_rate.capture(spec["obj"], 1, str(tmp_path), "lanes")
+    scene = tracer.load_scene(spec["obj"])
+    st = tracer.render(scene, spp=1, max_depth=8, rr_depth=5, path_loop="lanes").stats
+    assert (n, ns) == (st["camera_and_bounce_rays"], st["shadow_rays"]) and ns > 0
+    name = embree_rate.label(spec["obj"])
+    ray = np.fromfile(tmp_path / f"{name}.ray", np.float32).reshape(-1, 6)
+    sh = np.fromfile(tmp_path / f"{name}.shadow", np.float32).reshape(-1, 7)
+    assert len(ray) == n and len(sh) == ns
+    np.testing.assert_allclose(np.linalg.norm(ray[:, 3:], axis=1), 1.0, atol=1e-5)
+    np.testing.assert_allclose(np.linalg.norm(sh[:, 3:6], axis=1), 1.0, atol=1e-5)
+    c = 0.5 * (scene.bounds[0] + scene.bounds[1])
+    lo, hi = scene.bounds[0] - c - 1e-3, scene.bounds[1] - c + 1e-3
+    inside = np.all((sh[:, :3] >= lo) & (sh[:, :3] <= hi), axis=1)
+    assert inside.all() and np.all(sh[:, 6] > 0)

@@ -185,7 +185,7 @@ def _recorded(ctx, loop, n, **kw):
 
     ctx.path_loop = loop.split("-")[0]
     if loop == "lanes-general":
-        lanes._lane_scene(ctx).tl[lanes.TL_FAST] = lanes.GENERAL
+        lanes._lane_scene(ctx).tl[:, lanes.TL_FAST] = lanes.GENERAL
     got, stats = [], Stats()
     trace_wave(ctx, WaveBuffers(n), CameraSource(), Film(16, 16), 0, 0, n, stats, observe=got.append, **kw)
     on_lanes = loop != "wave"

@@ -70,7 +70,7 @@ from .sampling32 import (BIG, BLOCK, BOUNCE, D_COIN, D_DIR, D_LIGHT, D_POS, D_RR
 from .vertex import MAX_BOUNCES
 
 _CHUNKS = 64  # compaction: chunks counted, then written at their offsets
-# a vertex's class (LaneBuffers.fast, tl[TL_FAST]): the general kernel's, the fast kernel's (diffuse), the glossy
+# a vertex's class (LaneBuffers.fast, tl[:, TL_FAST]): the general kernel's, the fast kernel's (diffuse), the glossy
 # kernel's (engine.glossy: coated plastics and metals)
 GENERAL, DIFFUSE_CLASS, GLOSSY_CLASS = 0, 1, 2
 
@@ -95,17 +95,24 @@ class LaneBuffers:
         self.ks = np.ones(size, np.int64)  # split_lanes: copies of each lane (0: the window ended it)
 
 
-def _as_rows(a, dtype):
-    """The (rows, n) array `a` as padded rows (_rows) of `dtype`, its values in the first n columns."""
-    out = _rows(a.shape[0], a.shape[1], dtype)
-    out[:, : a.shape[1]] = a
+def _per_triangle(a, width):
+    """The (rows, n) array `a` as float32 (n + PAD, width): one row per triangle, holding its
+    values in the first `rows` columns, 64-byte aligned (a width of 16 floats keeps a triangle in
+    one cache line, 24 or 32 in two)."""
+    n = a.shape[1] + PAD
+    buf = np.zeros(n * width + 16, F)
+    off = (-buf.ctypes.data % 64) // 4
+    out = buf[off:off + n * width].reshape(n, width)
+    out[:a.shape[1], :a.shape[0]] = a.T
     return out
 
 
 class LaneScene:
-    """The scene as the lanes read it, float32 rows per triangle (padded: _rows; engine.rows): geo
-    (21 rows, 27 with UVs) v0 - centre, e1, e2, the unit geometric normal, the three corner normals
-    (zero: none), the corner UVs where a fast triangle is textured (rows G_*); tl (TL_ROWS)
+    """The scene as the lanes read it, float32, one row per triangle (_per_triangle: a kernel that
+    reads a hit's fields reads one or two cache lines, where a matrix of fields by triangle took
+    one line a field; engine.rows names the columns): geo (21 columns, 27 with UVs) v0 - centre,
+    e1, e2, the unit geometric normal, the three corner normals (zero: none), the corner UVs where
+    a fast triangle is textured (columns G_*); tl (TL_ROWS)
     NEE's probability of choosing the triangle, its area, its ray offset, 1 if one-sided, its
     vertices' class (fast_triangles), its colour's texture (-1: none), its colour (a metal's
     specular reflectance, else its diffuse reflectance) and emitted radiance (rows TL_*); the
@@ -127,15 +134,16 @@ class LaneScene:
         if self.textured:
             uv = surf.uv if surf.uv.shape[0] else np.zeros((nf, 3, 2))
             rows.append(uv.reshape(nf, 6).T)
-        self.geo = _as_rows(np.concatenate(rows), F)
+        geo = np.concatenate(rows)
+        self.geo = _per_triangle(geo, 24 if geo.shape[0] <= 24 else 32)
         param = surf.mat_param[surf.material]
-        self.tl = _rows(TL_ROWS, nf, F)
-        self.tl[TL_EPS, :nf] = surf.eps
-        self.tl[TL_ONE_SIDED, :nf] = (param[:, P_FLAGS].astype(np.int64) & ONE_SIDED) != 0
-        self.tl[TL_FAST, :nf] = fast
-        self.tl[TL_TEX, :nf] = tex
+        tl = np.zeros((TL_ROWS, nf), F)
+        tl[TL_EPS] = surf.eps
+        tl[TL_ONE_SIDED] = (param[:, P_FLAGS].astype(np.int64) & ONE_SIDED) != 0
+        tl[TL_FAST] = fast
+        tl[TL_TEX] = tex
         metal = (surf.mat_type[surf.material] == METAL)[:, None]
-        self.tl[TL_KD:TL_KD + 3, :nf] = np.where(metal, param[:, P_KS:P_KS + 3], param[:, P_KD:P_KD + 3]).T
+        tl[TL_KD:TL_KD + 3] = np.where(metal, param[:, P_KS:P_KS + 3], param[:, P_KD:P_KD + 3]).T
         if surf.tex_info.shape[0]:
             self.tinfo = surf.tex_info.astype(F)
             self.tint = surf.tex_info[:, 1:4].astype(np.int32)
@@ -150,9 +158,10 @@ class LaneScene:
         self.smooth = surf.vn.shape[0] > 0
         e = lt.tri
         sel = (1.0 - lt.p_env) * np.diff(lt.cdf)
-        self.tl[TL_EMIT:TL_EMIT + 3, e] = lt.radiance.T
-        self.tl[TL_SEL, e] = sel
-        self.tl[TL_AREA, e] = lt.area
+        tl[TL_EMIT:TL_EMIT + 3, e] = lt.radiance.T
+        tl[TL_SEL, e] = sel
+        tl[TL_AREA, e] = lt.area
+        self.tl = _per_triangle(tl, 16)
         self.n_lights = int(e.shape[0])
         if self.n_lights:
             prob, alias = alias_table(sel / sel.sum())
@@ -494,7 +503,7 @@ def intersect(fn, scene, scratch, lf, n, hit, prim):
 
 @kernel
 def classify(lf, li, n, hit, prim, tl, geo, list_diffuse, escape_fast, state, ks, flags, fast_lane, lists):
-    """Mark each lane 0 .. n-1 with its vertex's class (fast_lane: a hit's triangle's tl[TL_FAST],
+    """Mark each lane 0 .. n-1 with its vertex's class (fast_lane: a hit's triangle's tl[p, TL_FAST],
     an escape DIFFUSE_CLASS where escape_fast, else GENERAL), and list the GENERAL lanes in order in
     lists[0], the listed kernel's in lists[1] (the GLOSSY_CLASS ones, and with list_diffuse the
     DIFFUSE_CLASS ones too); returns how many of each. A lane with ks 0
@@ -513,7 +522,7 @@ def classify(lf, li, n, hit, prim, tl, geo, list_diffuse, escape_fast, state, ks
             p = prim[k]
             cls = GENERAL
             if p >= 0:
-                cls = np.int32(tl[TL_FAST, p])
+                cls = np.int32(tl[p, TL_FAST])
             elif escape_fast:
                 cls = DIFFUSE_CLASS
             fast_lane[k] = cls
@@ -534,14 +543,14 @@ def classify(lf, li, n, hit, prim, tl, geo, list_diffuse, escape_fast, state, ks
                         L_cam[i, q] = 0.0
                 continue
             if first:
-                cos_o = -(lf[DX, k] * geo[G_N, p] + lf[DY, k] * geo[G_N + 1, p] + lf[DZ, k] * geo[G_N + 2, p])
+                cos_o = -(lf[DX, k] * geo[p, G_N] + lf[DY, k] * geo[p, G_N + 1] + lf[DZ, k] * geo[p, G_N + 2])
                 sgn = 1.0 if cos_o >= 0.0 else -1.0
                 lit = 1.0 if cos_o > 0.0 else 0.0
                 ns = corner_normal(geo, p, np.float64(hit[1, k]), np.float64(hit[2, k]))
                 for q in range(3):
                     aov[i, 3 + q] = sgn * ns[q]
                 for q in range(3):
-                    L_cam[i, q] = lf[BR + q, k] * tl[TL_EMIT + q, p] * lit
+                    L_cam[i, q] = lf[BR + q, k] * tl[p, TL_EMIT + q] * lit
                 aov[i, 6] = hit[H_T, k]
         counts[c + 1, 0] = g
         counts[c + 1, 1] = h
@@ -585,15 +594,15 @@ def flat_reflectance(n, prim, fast_lane, tl, kd):
     for k in prange(n):
         p = prim[k]
         pc = p if (p >= 0) & (fast_lane[k] != 0) else 0
-        kd[0, k] = tl[TL_KD, pc]
-        kd[1, k] = tl[TL_KD + 1, pc]
-        kd[2, k] = tl[TL_KD + 2, pc]
+        kd[0, k] = tl[pc, TL_KD]
+        kd[1, k] = tl[pc, TL_KD + 1]
+        kd[2, k] = tl[pc, TL_KD + 2]
 
 
 @kernel(fastmath={"arcp", "contract", "nsz"})
 def reflectance(n, hit, prim, fast_lane, geo, tl, tinfo, tint, tdata, kd):
     """The diffuse reflectance at the vertex of each fast lane 0 .. n-1 into kd (3 rows): its
-    triangle's texture (tl[TL_TEX]) at the hit's UV, as material.texture_eval (constant,
+    triangle's texture (tl[p, TL_TEX]) at the hit's UV, as material.texture_eval (constant,
     checkerboard, or bilinear and repeating; black where the texel's coordinate is not finite), or
     its material's reflectance; tinfo, tint, tdata: LaneScene's textures."""
     for k in prange(n):
@@ -601,13 +610,13 @@ def reflectance(n, hit, prim, fast_lane, geo, tl, tinfo, tint, tdata, kd):
         pc = p if (p >= 0) & (fast_lane[k] != 0) else 0
         b1, b2 = hit[1, k], hit[2, k]
         b0 = ONE - b1 - b2
-        tx = tl[TL_TEX, pc]
+        tx = tl[pc, TL_TEX]
         textured = tx >= ZERO
         kt = np.int32(tx) if textured else np.int32(0)
         pt = pc if textured else 0
         ru = np.int32(G_UV) if textured else np.int32(0)  # geo has UV rows only if some fast triangle is textured
-        u = b0 * geo[ru, pt] + b1 * geo[ru + 2, pt] + b2 * geo[ru + 4, pt]
-        v = b0 * geo[ru + 1, pt] + b1 * geo[ru + 3, pt] + b2 * geo[ru + 5, pt]
+        u = b0 * geo[pt, ru] + b1 * geo[pt, ru + 2] + b2 * geo[pt, ru + 4]
+        v = b0 * geo[pt, ru + 1] + b1 * geo[pt, ru + 3] + b2 * geo[pt, ru + 5]
         uu = tinfo[kt, 4] * u + tinfo[kt, 5] * v + tinfo[kt, 6]
         vv = tinfo[kt, 7] * u + tinfo[kt, 8] * v + tinfo[kt, 9]
         kind = tinfo[kt, 0]
@@ -643,9 +652,9 @@ def reflectance(n, hit, prim, fast_lane, geo, tl, tinfo, tint, tdata, kd):
         j11 = j11 if bitmap else np.int32(0)
         w00, w01 = (ONE - fy) * (ONE - fx), (ONE - fy) * fx
         w10, w11 = fy * (ONE - fx), fy * fx
-        ar = tl[TL_KD, pc]
-        ag = tl[TL_KD + 1, pc]
-        ab = tl[TL_KD + 2, pc]
+        ar = tl[pc, TL_KD]
+        ag = tl[pc, TL_KD + 1]
+        ab = tl[pc, TL_KD + 2]
         c0 = np.int32(10) if first | (kind == F(TEX_CONSTANT)) else np.int32(13)  # colour 0 or 1
         ar = ar if not textured else tinfo[kt, c0]
         ag = ag if not textured else tinfo[kt, c0 + 1]
@@ -671,7 +680,7 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_t, alia
     direction, throughput, density, depth, delta flag: written back as loaded, since a store under a
     branch, or a load after a store, keeps LLVM from packing the loop); their other rows are
     scratch until shade_general, which runs next, writes them. lim: int32
-    rr_depth, max_depth (< 0: none), nee, the emissive triangles' count; the scene's rows as
+    rr_depth, max_depth (< 0: none), nee, the emissive triangles' count; the scene's tables as
     LaneScene's. With corner normals the vertex is shaded in the frame of the interpolated normal,
     and a direction on the other side of the true surface than wo gets nothing (a light leak only
     shading normals make possible, as material.crosses)."""
@@ -687,18 +696,18 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_t, alia
         pc = p if hit_ok else 0
         dx, dy, dz = lf[DX, k], lf[DY, k], lf[DZ, k]
         t, b1, b2 = hit[0, k], hit[1, k], hit[2, k]
-        x0 = geo[0, pc] + b1 * geo[3, pc] + b2 * geo[6, pc]
-        x1 = geo[1, pc] + b1 * geo[4, pc] + b2 * geo[7, pc]
-        x2 = geo[2, pc] + b1 * geo[5, pc] + b2 * geo[8, pc]
-        nx, ny, nz = geo[G_N, pc], geo[G_N + 1, pc], geo[G_N + 2, pc]
+        x0 = geo[pc, 0] + b1 * geo[pc, 3] + b2 * geo[pc, 6]
+        x1 = geo[pc, 1] + b1 * geo[pc, 4] + b2 * geo[pc, 7]
+        x2 = geo[pc, 2] + b1 * geo[pc, 5] + b2 * geo[pc, 8]
+        nx, ny, nz = geo[pc, G_N], geo[pc, G_N + 1], geo[pc, G_N + 2]
         cos_o = -(dx * nx + dy * ny + dz * nz)
         sgn = ONE if cos_o >= ZERO else -ONE
         fx, fy, fz = nx * sgn, ny * sgn, nz * sgn  # the true normal on the side the path arrived
         # the shading normal: the corner normals interpolated, in ng's hemisphere (ng where they vanish)
         b0 = ONE - b1 - b2
-        snx = b0 * geo[G_VN, pc] + b1 * geo[G_VN + 3, pc] + b2 * geo[G_VN + 6, pc]
-        sny = b0 * geo[G_VN + 1, pc] + b1 * geo[G_VN + 4, pc] + b2 * geo[G_VN + 7, pc]
-        snz = b0 * geo[G_VN + 2, pc] + b1 * geo[G_VN + 5, pc] + b2 * geo[G_VN + 8, pc]
+        snx = b0 * geo[pc, G_VN] + b1 * geo[pc, G_VN + 3] + b2 * geo[pc, G_VN + 6]
+        sny = b0 * geo[pc, G_VN + 1] + b1 * geo[pc, G_VN + 4] + b2 * geo[pc, G_VN + 7]
+        snz = b0 * geo[pc, G_VN + 2] + b1 * geo[pc, G_VN + 5] + b2 * geo[pc, G_VN + 8]
         c2 = snx * snx + sny * sny + snz * snz
         has_n = (c2 > ZERO) & (c2 < F(np.inf))
         inv_n = ONE / math.sqrt(c2 if has_n else ONE)
@@ -709,7 +718,7 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_t, alia
         wo_z = -(dx * snx + dy * sny + dz * snz)
         ssg = ONE if wo_z >= ZERO else -ONE
         sx, sy, sz = snx * ssg, sny * ssg, snz * ssg  # the shading normal on wo's side
-        black = (tl[TL_ONE_SIDED, pc] > ZERO) & (wo_z <= ZERO)  # a one-sided surface seen from behind
+        black = (tl[pc, TL_ONE_SIDED] > ZERO) & (wo_z <= ZERO)  # a one-sided surface seen from behind
         ar = ZERO if black else kd[0, k]
         ag = ZERO if black else kd[1, k]
         ab = ZERO if black else kd[2, k]
@@ -723,13 +732,13 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_t, alia
 
         # emission (one-sided), MIS-weighted against the light sample that could have found it
         lit = fast & hit_ok & (cos_o > ZERO)
-        pl = tl[TL_SEL, pc] * t * t / max(tl[TL_AREA, pc] * cos_o, TINY)
+        pl = tl[pc, TL_SEL] * t * t / max(tl[pc, TL_AREA] * cos_o, TINY)
         pp = prev_pdf * prev_pdf
         w_mis = pp / max(pp + pl * pl, TINY)
         w_e = ZERO if not lit else (w_mis if nee & (depth > 0) & (delta == 0) else ONE)
-        lf[LR, k] += br * tl[TL_EMIT, pc] * w_e
-        lf[LG, k] += bg * tl[TL_EMIT + 1, pc] * w_e
-        lf[LB, k] += bb * tl[TL_EMIT + 2, pc] * w_e
+        lf[LR, k] += br * tl[pc, TL_EMIT] * w_e
+        lf[LG, k] += bg * tl[pc, TL_EMIT + 1] * w_e
+        lf[LB, k] += bb * tl[pc, TL_EMIT + 2] * w_e
 
         # a light sample: an emissive triangle from the alias table, a point uniform on it
         j = alias_column(key, base + D_LIGHT, nl)
@@ -737,33 +746,33 @@ def shade(lf, li, n, hit, prim, sh, flags, fast_lane, geo, tl, kd, alias_t, alia
         su = math.sqrt(rand32(key, base + D_POS))
         lb1 = ONE - su
         lb2 = rand32(key, base + D_POS + 1) * su
-        lx0 = geo[0, lj] + lb1 * geo[3, lj] + lb2 * geo[6, lj]  # the light point
-        lx1 = geo[1, lj] + lb1 * geo[4, lj] + lb2 * geo[7, lj]
-        lx2 = geo[2, lj] + lb1 * geo[5, lj] + lb2 * geo[8, lj]
+        lx0 = geo[lj, 0] + lb1 * geo[lj, 3] + lb2 * geo[lj, 6]  # the light point
+        lx1 = geo[lj, 1] + lb1 * geo[lj, 4] + lb2 * geo[lj, 7]
+        lx2 = geo[lj, 2] + lb1 * geo[lj, 5] + lb2 * geo[lj, 8]
         wx, wy, wz = lx0 - x0, lx1 - x1, lx2 - x2
         d2 = max(wx * wx + wy * wy + wz * wz, TINY)
         inv_d = ONE / math.sqrt(d2)
         wx, wy, wz = wx * inv_d, wy * inv_d, wz * inv_d
-        cos_l = -(wx * geo[G_N, lj] + wy * geo[G_N + 1, lj] + wz * geo[G_N + 2, lj])
+        cos_l = -(wx * geo[lj, G_N] + wy * geo[lj, G_N + 1] + wz * geo[lj, G_N + 2])
         cos_s = wx * sx + wy * sy + wz * sz
         same_side = (wx * fx + wy * fy + wz * fz) > ZERO
         ok = on & nee & (n_lights > 0) & (cos_l > ZERO) & (cos_s > ZERO) & same_side
-        pls = tl[TL_SEL, lj] * d2 / max(tl[TL_AREA, lj] * cos_l, TINY)
+        pls = tl[lj, TL_SEL] * d2 / max(tl[lj, TL_AREA] * cos_l, TINY)
         pb = cos_s * INV_PI
         g = (pb * pls / max(pls * pls + pb * pb, TINY)) if ok else ZERO  # f cos / p_light x the power heuristic
-        eps = tl[TL_EPS, pc]
+        eps = tl[pc, TL_EPS]
         ox, oy, oz = x0 + fx * eps, x1 + fy * eps, x2 + fz * eps
         # the shadow ray: from the offset origin to the light point pushed off its triangle, toward
         # x, by the light's own offset (as shading.shadow_ray)
-        el = tl[TL_EPS, lj]
-        ex = lx0 + el * geo[G_N, lj] - ox
-        ey = lx1 + el * geo[G_N + 1, lj] - oy
-        ez = lx2 + el * geo[G_N + 2, lj] - oz
+        el = tl[lj, TL_EPS]
+        ex = lx0 + el * geo[lj, G_N] - ox
+        ey = lx1 + el * geo[lj, G_N + 1] - oy
+        ez = lx2 + el * geo[lj, G_N + 2] - oz
         e2 = max(ex * ex + ey * ey + ez * ez, TINY)
         inv_e = ONE / math.sqrt(e2)
-        sr = br * ar * tl[TL_EMIT, lj] * g
-        sg = bg * ag * tl[TL_EMIT + 1, lj] * g
-        sb = bb * ab * tl[TL_EMIT + 2, lj] * g
+        sr = br * ar * tl[lj, TL_EMIT] * g
+        sg = bg * ag * tl[lj, TL_EMIT + 1] * g
+        sb = bb * ab * tl[lj, TL_EMIT + 2] * g
         sh[SOX, k], sh[SOY, k], sh[SOZ, k] = ox, oy, oz
         sh[SDX, k], sh[SDY, k], sh[SDZ, k] = ex * inv_e, ey * inv_e, ez * inv_e
         sh[TMAX, k] = e2 * inv_e * SHORT

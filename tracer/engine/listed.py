@@ -45,14 +45,14 @@ from .vertex import MAX_BOUNCES
 
 @jit(inline="always")
 def corner_normal(geo, p, b1, b2):
-    """The shading normal of triangle p at barycentrics (b1, b2), float64, from the lanes' geo rows
+    """The shading normal of triangle p at barycentrics (b1, b2), float64, from the lanes' geo table
     (engine.rows): its corner normals interpolated, turned into the geometric normal's hemisphere;
     the geometric normal where they vanish (as material.shading_normal)."""
     b0 = 1.0 - b1 - b2
-    n = (b0 * geo[G_VN, p] + b1 * geo[G_VN + 3, p] + b2 * geo[G_VN + 6, p],
-         b0 * geo[G_VN + 1, p] + b1 * geo[G_VN + 4, p] + b2 * geo[G_VN + 7, p],
-         b0 * geo[G_VN + 2, p] + b1 * geo[G_VN + 5, p] + b2 * geo[G_VN + 8, p])
-    ng = (np.float64(geo[G_N, p]), np.float64(geo[G_N + 1, p]), np.float64(geo[G_N + 2, p]))
+    n = (b0 * geo[p, G_VN] + b1 * geo[p, G_VN + 3] + b2 * geo[p, G_VN + 6],
+         b0 * geo[p, G_VN + 1] + b1 * geo[p, G_VN + 4] + b2 * geo[p, G_VN + 7],
+         b0 * geo[p, G_VN + 2] + b1 * geo[p, G_VN + 5] + b2 * geo[p, G_VN + 8])
+    ng = (np.float64(geo[p, G_N]), np.float64(geo[p, G_N + 1]), np.float64(geo[p, G_N + 2]))
     return _unit_toward(n, ng, ng)
 
 
@@ -142,10 +142,10 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, s
         d = (np.float64(lf[DX, k]), np.float64(lf[DY, k]), np.float64(lf[DZ, k]))
         b1 = np.float64(hit[1, k])
         b2 = np.float64(hit[2, k])
-        x = (geo[0, p] + b1 * np.float64(geo[3, p]) + b2 * np.float64(geo[6, p]),
-             geo[1, p] + b1 * np.float64(geo[4, p]) + b2 * np.float64(geo[7, p]),
-             geo[2, p] + b1 * np.float64(geo[5, p]) + b2 * np.float64(geo[8, p]))
-        ng = (np.float64(geo[G_N, p]), np.float64(geo[G_N + 1, p]), np.float64(geo[G_N + 2, p]))
+        x = (geo[p, 0] + b1 * np.float64(geo[p, 3]) + b2 * np.float64(geo[p, 6]),
+             geo[p, 1] + b1 * np.float64(geo[p, 4]) + b2 * np.float64(geo[p, 7]),
+             geo[p, 2] + b1 * np.float64(geo[p, 5]) + b2 * np.float64(geo[p, 8]))
+        ng = (np.float64(geo[p, G_N]), np.float64(geo[p, G_N + 1]), np.float64(geo[p, G_N + 2]))
         cos_o = -dot(d, ng)
         bt = (np.float64(lf[BR, k]), np.float64(lf[BG, k]), np.float64(lf[BB, k]))
         dk = li[DEPTH, k]
@@ -154,17 +154,17 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, s
         base = BOUNCE + BLOCK * dk
 
         # emission (a diffuse emitter, one-sided), MIS-weighted against the light sample that could have found it
-        if cos_o > 0.0 and tl[TL_SEL, p] > 0.0:
+        if cos_o > 0.0 and tl[p, TL_SEL] > 0.0:
             th = np.float64(hit[H_T, k])
             we = 1.0
             if nee and dk > 0 and not pdelta:
-                pl = tl[TL_SEL, p] * th * th / (tl[TL_AREA, p] * cos_o)
+                pl = tl[p, TL_SEL] * th * th / (tl[p, TL_AREA] * cos_o)
                 pp = np.float64(lf[PDF, k]) ** 2
                 we = pp / (pp + pl * pl)
             for c in range(3):
-                lf[LR + c, k] += bt[c] * tl[TL_EMIT + c, p] * we
+                lf[LR + c, k] += bt[c] * tl[p, TL_EMIT + c] * we
             if record != RECORD_NONE and prev_rec[i] >= 0:
-                le = (np.float64(tl[TL_EMIT, p]), np.float64(tl[TL_EMIT + 1, p]), np.float64(tl[TL_EMIT + 2, p]))
+                le = (np.float64(tl[p, TL_EMIT]), np.float64(tl[p, TL_EMIT + 1]), np.float64(tl[p, TL_EMIT + 2]))
                 record_emission(prev_rec[i], record, bt, le, we, np.float64(lf[PDF, k]), r_L0, r_direct, r_plight)
 
         ns = corner_normal(geo, p, b1, b2)
@@ -186,7 +186,7 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, s
             aov_open[i] = smooth_metal
         black = (int(prm[14]) & ONE_SIDED) != 0 and wo[2] <= 0.0  # a one-sided surface seen from behind
         on = (max_depth < 0 or dk + 1 < max_depth) and not black
-        eps = np.float64(tl[TL_EPS, p])
+        eps = np.float64(tl[p, TL_EPS])
         gn = gain[i]
 
         # the guide's roulette of the bounce that arrived here, after its emission (never after a delta bounce)
@@ -214,16 +214,16 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, s
             su = math.sqrt(np.float64(rand32(key, base + D_POS)))
             lb1 = 1.0 - su
             lb2 = np.float64(rand32(key, base + D_POS + 1)) * su
-            w = (geo[0, lj] + lb1 * np.float64(geo[3, lj]) + lb2 * np.float64(geo[6, lj]) - x[0],
-                 geo[1, lj] + lb1 * np.float64(geo[4, lj]) + lb2 * np.float64(geo[7, lj]) - x[1],
-                 geo[2, lj] + lb1 * np.float64(geo[5, lj]) + lb2 * np.float64(geo[8, lj]) - x[2])
+            w = (geo[lj, 0] + lb1 * np.float64(geo[lj, 3]) + lb2 * np.float64(geo[lj, 6]) - x[0],
+                 geo[lj, 1] + lb1 * np.float64(geo[lj, 4]) + lb2 * np.float64(geo[lj, 7]) - x[1],
+                 geo[lj, 2] + lb1 * np.float64(geo[lj, 5]) + lb2 * np.float64(geo[lj, 8]) - x[2])
             d2 = dot(w, w)
             if d2 > 0.0:
                 dist = math.sqrt(d2)
                 wl = (w[0] / dist, w[1] / dist, w[2] / dist)
-                cos_l = -(wl[0] * geo[G_N, lj] + wl[1] * geo[G_N + 1, lj] + wl[2] * geo[G_N + 2, lj])
+                cos_l = -(wl[0] * geo[lj, G_N] + wl[1] * geo[lj, G_N + 1] + wl[2] * geo[lj, G_N + 2])
                 if cos_l > 0.0:
-                    pls = tl[TL_SEL, lj] * d2 / (tl[TL_AREA, lj] * cos_l)
+                    pls = tl[lj, TL_SEL] * d2 / (tl[lj, TL_AREA] * cos_l)
                     wil = to_local(wl, s, t, ns)
                     f, pb = _eval_pdf(kind, prm, table, wo, wil)
                     pb = mixture_pdf(gs, slot, a, pb, wl)
@@ -233,9 +233,9 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, s
                         # from the offset origin to the light point pushed off its triangle, toward x,
                         # by the light's own offset (as shading.shadow_ray)
                         so = offset_point(x, ng, wl, eps)
-                        el = np.float64(tl[TL_EPS, lj])
-                        e = (x[0] + w[0] + el * geo[G_N, lj] - so[0], x[1] + w[1] + el * geo[G_N + 1, lj] - so[1],
-                             x[2] + w[2] + el * geo[G_N + 2, lj] - so[2])
+                        el = np.float64(tl[lj, TL_EPS])
+                        e = (x[0] + w[0] + el * geo[lj, G_N] - so[0], x[1] + w[1] + el * geo[lj, G_N + 1] - so[1],
+                             x[2] + w[2] + el * geo[lj, G_N + 2] - so[2])
                         te = math.sqrt(dot(e, e))
                         if te > 0.0:
                             flags[SHADOW, k] = np.int32(1)
@@ -246,9 +246,9 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, s
                             sh[SDY, k] = e[1] / te
                             sh[SDZ, k] = e[2] / te
                             sh[TMAX, k] = te * SHORT
-                            sh[SR, k] = bt[0] * f[0] * tl[TL_EMIT, lj] * g
-                            sh[SG, k] = bt[1] * f[1] * tl[TL_EMIT + 1, lj] * g
-                            sh[SB, k] = bt[2] * f[2] * tl[TL_EMIT + 2, lj] * g
+                            sh[SR, k] = bt[0] * f[0] * tl[lj, TL_EMIT] * g
+                            sh[SG, k] = bt[1] * f[1] * tl[lj, TL_EMIT + 1] * g
+                            sh[SB, k] = bt[2] * f[2] * tl[lj, TL_EMIT + 2] * g
         if not on:
             continue
 

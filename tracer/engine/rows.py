@@ -1,5 +1,5 @@
 """The lanes' state, declared once: the rows of the float32 and int32 matrices that hold a wave's
-paths ([row, lane]), a bounce's flags and shadow rays, and the scene's rows per triangle. The
+paths ([row, lane]), a bounce's flags and shadow rays, and the scene's columns per triangle. The
 kernels of tracer.engine.lanes and tracer.engine.general index rows by these names; LaneBuffers
 allocates from the tuples, and compaction and splitting copy every row of them."""
 import numpy as np
@@ -23,11 +23,12 @@ SOX, SOY, SOZ, SDX, SDY, SDZ, TMAX, SR, SG, SB = range(len(SHADOW_ROWS))
 # A bounce's hit: its distance and barycentrics
 HIT_ROWS = ("t", "b1", "b2")
 H_T, H_B1, H_B2 = range(len(HIT_ROWS))
-# The scene's rows per triangle: geo (the corner v0, the edges e1, e2, the geometric normal, the
-# corner normals vn0, vn1, vn2: three rows each; in a scene where some classed triangle is
-# textured, the corner UVs u0 v0 u1 v1 u2 v2) and tl (NEE's probability of choosing it, its area,
-# its ray offset, 1 if one-sided, its vertices' class (lanes.fast_triangles), its colour's texture
-# (-1: none), its colour and its emitted radiance, three rows each)
+# The scene's columns per triangle (lanes.LaneScene: geo[triangle, column], tl[triangle, column]):
+# geo (the corner v0, the edges e1, e2, the geometric normal, the corner normals vn0, vn1, vn2:
+# three columns each; in a scene where some classed triangle is textured, the corner UVs u0 v0 u1
+# v1 u2 v2) and tl (NEE's probability of choosing it, its area, its ray offset, 1 if one-sided, its
+# vertices' class (lanes.fast_triangles), its colour's texture (-1: none), its colour and its
+# emitted radiance, three columns each)
 G_V0, G_E1, G_E2, G_N, G_VN, G_UV = 0, 3, 6, 9, 12, 21
 TL_SEL, TL_AREA, TL_EPS, TL_ONE_SIDED, TL_FAST, TL_TEX, TL_KD, TL_EMIT = 0, 1, 2, 3, 4, 5, 6, 9
 TL_ROWS = 12
