@@ -1,5 +1,7 @@
 """What the benches share: scene names to paths, references, and method specs to render() arguments."""
 import os
+import shutil
+import sys
 
 from tracer.guiding import make_guide
 from tracer.integrators import make_integrator
@@ -84,3 +86,13 @@ def check_method(method):
     integ = make_integrator(args.get("integrator", "path"))
     name = args.get("guide", "bsdf")
     integ.check_guide(make_guide(name, **(args.get("guide_settings") or {})), name)
+
+
+def built_with_gcc(prog, needs, folder, build):
+    """build(folder) (a C program or library built with gcc into `folder`, made if missing), or None
+    with one line on stderr where gcc is missing: "<prog> needs <needs>"."""
+    if shutil.which("gcc") is None:
+        print(f"{prog} needs {needs}", file=sys.stderr)
+        return None
+    os.makedirs(folder, exist_ok=True)
+    return build(folder)

@@ -12,16 +12,14 @@ into bench/results/embree_rate/. Then it builds bench/embree_rate.c with gcc (-O
 """
 import argparse
 import os
-import shutil
 import subprocess
-import sys
 
 import numpy as np
 
 import tracer
 from tracer.bvh import embree
 
-from . import throughput
+from . import common, throughput
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "bench", "results", "embree_rate")
@@ -133,11 +131,9 @@ def main(argv=None):
     p.add_argument("--path-loop", default="thread", choices=("thread", "lanes"),
                    help="whose rays: the per-thread loop's batches as the accel is asked, or the lanes' packets")
     a = p.parse_args(argv)
-    if shutil.which("gcc") is None:
-        print("bench.embree_rate needs gcc (with OpenMP) to build bench/embree_rate.c", file=sys.stderr)
+    exe = common.built_with_gcc("bench.embree_rate", "gcc (with OpenMP) to build bench/embree_rate.c", OUT, build)
+    if exe is None:
         return 2
-    os.makedirs(OUT, exist_ok=True)
-    exe = build(OUT)
     for name in a.scenes.split(","):
         n, ns = capture(name, a.spp, OUT, a.path_loop)
         print(f"# {name}: {n} closest-hit rays, {ns} shadow rays at {a.spp} spp", flush=True)

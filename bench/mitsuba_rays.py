@@ -18,12 +18,11 @@ import argparse
 import importlib.util
 import json
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
 
-from . import mitsuba_side, throughput
+from . import common, mitsuba_side, throughput
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "bench", "results", "mitsuba_rays")
@@ -60,15 +59,17 @@ def mitsuba_counts(lib, job):
             return json.load(f)
 
 
+def totals(counts):
+    """(closest-hit rays, shadow rays) of mitsuba_counts' counts, every width together."""
+    return tuple(sum(counts[f"{kind}{w}"][1] for w in (1, 4, 8, 16)) for kind in ("intersect", "occluded"))
+
+
 def our_counts(job):
-    """(samples, closest-hit rays, shadow rays) of one of our renders of job's scene (after an
-    untimed one)."""
+    """(samples, closest-hit rays, shadow rays) of one of our renders of job's scene."""
     import tracer
 
     scene = tracer.load_scene(job["spec"]["obj"], width=job["width"], height=job["height"])
-    kw = dict(max_depth=job["max_depth"], rr_depth=job["rr_depth"])
-    tracer.render(scene, spp=1, **kw)
-    st = tracer.render(scene, spp=job["spp"], seed=0, **kw).stats
+    st = tracer.render(scene, spp=job["spp"], seed=0, max_depth=job["max_depth"], rr_depth=job["rr_depth"]).stats
     return st["samples"], st["camera_and_bounce_rays"], st["shadow_rays"]
 
 
@@ -78,8 +79,7 @@ def rows(name, job, lib):
     out = [(name, "ours (lanes)", rays / n, shadows / n, "16 (packed)", "-")]
     c = mitsuba_counts(lib, job)
     samples = job["width"] * job["height"] * job["spp"]
-    hits = sum(c[f"intersect{w}"][1] for w in (1, 4, 8, 16))
-    shadow = sum(c[f"occluded{w}"][1] for w in (1, 4, 8, 16))
+    hits, shadow = totals(c)
     wide = [w for w in (16, 8, 4) if c[f"intersect{w}"][0]]
     w = wide[0] if wide else 1
     ic, il, ih = c[f"intersect{w}"]
@@ -98,19 +98,19 @@ def main(argv=None):
     p.add_argument("--max-depth", type=int, default=8)
     p.add_argument("--rr-depth", type=int, default=5)
     a = p.parse_args(argv)
-    if shutil.which("gcc") is None:
-        print("bench.mitsuba_rays needs gcc to build bench/mitsuba_rays.c", file=sys.stderr)
-        return 2
-    os.makedirs(OUT, exist_ok=True)
-    lib = build(OUT)
-    print("| scene | renderer | closest-hit rays / sample | shadow rays / sample | active lanes a call "
-          "(closest-hit / shadow) | coherent share of closest-hit calls |")
-    print("|---|---|---|---|---|---|")
-    for name in a.scenes.split(","):
+    names = a.scenes.split(",")
+    for name in names:
         if name not in throughput.NAMED or name == "staircase":
             print(f"bench.mitsuba_rays: {name}: not one of bench.scenes' scenes (open-1k, open-1m, mitsuba-cornell)",
                   file=sys.stderr)
             return 2
+    lib = common.built_with_gcc("bench.mitsuba_rays", "gcc to build bench/mitsuba_rays.c", OUT, build)
+    if lib is None:
+        return 2
+    print("| scene | renderer | closest-hit rays / sample | shadow rays / sample | active lanes a call "
+          "(closest-hit / shadow) | coherent share of closest-hit calls |")
+    print("|---|---|---|---|---|---|")
+    for name in names:
         job = {"spec": throughput.scene_spec(name), "spp": a.spp, "width": a.width, "height": a.height,
                "max_depth": a.max_depth, "rr_depth": a.rr_depth, "variant": mitsuba_side.VARIANT}
         for r in rows(name, job, lib):

@@ -23,8 +23,7 @@ def test_the_counter_counts_every_ray_mitsuba_traces(tmp_path, monkeypatch):
     n = 8 * 8 * 2
 
     def totals(max_depth):
-        c = mitsuba_rays.mitsuba_counts(lib, dict(job, max_depth=max_depth))
-        return (sum(c[f"intersect{w}"][1] for w in (1, 4, 8, 16)), sum(c[f"occluded{w}"][1] for w in (1, 4, 8, 16)))
+        return mitsuba_rays.totals(mitsuba_rays.mitsuba_counts(lib, dict(job, max_depth=max_depth)))
 
     assert totals(1) == (n, 0)
     hits, shadows = totals(2)

@@ -115,7 +115,7 @@ class LaneScene:
     a fast triangle is textured (columns G_*); tl (TL_ROWS)
     NEE's probability of choosing the triangle, its area, its ray offset, 1 if one-sided, its
     vertices' class (fast_triangles), its colour's texture (-1: none), its colour (a metal's
-    specular reflectance, else its diffuse reflectance) and emitted radiance (rows TL_*); the
+    specular reflectance, else its diffuse reflectance) and emitted radiance (columns TL_*); the
     textures the classes read: tinfo (T, 16)
     float32 the rows of tracer.material's texture table, tint (T, 3) int32 their texel offset,
     width and height, tdata the texels (one constant row when the scene has none); the alias table
