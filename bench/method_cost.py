@@ -38,7 +38,7 @@ def cost(stats):
 def measure(scene, method, spp, seeds, threads=None):
     """One record per seed: the image passes' seconds and spp, seconds a spp, the other passes'
     seconds, the render's time outside its passes (a guide's updates, gpt's solve) and the render's
-    own counters."""
+    own counters (rays, shadow rays, seconds by stage over every pass)."""
     args = render_args(method)
     tracer.render(scene, spp=2, seed=0, threads=threads, progress=False, **args)  # loaded and touched
     rows = []
@@ -50,7 +50,9 @@ def measure(scene, method, spp, seeds, threads=None):
                      "seconds_per_spp": seconds / own_spp, "other_pass_seconds": other,
                      "time_between": max(st["time_render"] - passes, 0.0), "samples": st["samples"],
                      "nonfinite_samples": st["nonfinite_samples"], "threads": st["threads"],
-                     "lane_samples": st["lane_samples"], "split_copies": st["split_copies"]})
+                     "lane_samples": st["lane_samples"], "split_copies": st["split_copies"],
+                     "rays": st["camera_and_bounce_rays"], "shadow_rays": st["shadow_rays"],
+                     "time_stages": st["time_stages"]})
     return rows
 
 
