@@ -27,6 +27,15 @@ def scene_path(name, scene_dir=None):
                      + (f" or {scene_dir}" if scene_dir else " (external scenes need --scene-dir)"))
 
 
+def scene_name(given):
+    """A scene's name in records and charts: the name given, or a file's stem (its folder's name for
+    the shared scenes' scene.obj and scene.xml)."""
+    if not given.endswith((".obj", ".json", ".xml")):
+        return given
+    stem = os.path.splitext(os.path.basename(given))[0]
+    return os.path.basename(os.path.dirname(os.path.abspath(given))) if stem == "scene" else stem
+
+
 def reference_for(path):
     out = default_out(path)
     if not os.path.isfile(os.path.join(out, "reference.exr")):

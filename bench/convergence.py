@@ -56,7 +56,7 @@ from tracer import metrics
 from . import atomic
 from . import sweep as sweep_module
 from tracer.guiding import guide_names
-from .common import DENOISED, GRADIENT_METHODS, check_method, method_spec, reference_for, render_args, scene_path  # noqa: F401
+from .common import DENOISED, GRADIENT_METHODS, check_method, method_spec, reference_for, render_args, scene_name, scene_path  # noqa: F401
 from . import common
 from .reference import ROOT
 from .reference import load as load_reference
@@ -419,15 +419,6 @@ def rescore(out, scene_dir=None):
             image = np.load(os.path.join(out, "images", name, r["image"]))
             r["metrics"] = metrics.all_metrics(image, ref)
     return write_outputs(out, records, scenes, methods, times, floors)
-
-
-def scene_name(given):
-    """A scene's name in records and charts: the name given, or a file's stem (its folder's name for
-    the shared scenes' scene.obj and scene.xml)."""
-    if not given.endswith((".obj", ".json", ".xml")):
-        return given
-    stem = os.path.splitext(os.path.basename(given))[0]
-    return os.path.basename(os.path.dirname(os.path.abspath(given))) if stem == "scene" else stem
 
 
 def cell_key(c):

@@ -17,11 +17,12 @@ passes are reported apart (`other_pass_seconds`), and so is the render's time ou
 import argparse
 import os
 import sys
+from statistics import median
 
 import tracer
 
 from . import atomic
-from .common import check_method, render_args, scene_path
+from .common import check_method, render_args, scene_name, scene_path
 from .reference import ROOT
 
 OUT = os.path.join(ROOT, "bench", "results", "method_cost.json")
@@ -63,20 +64,14 @@ def table(records, methods):
              "|---|---|---|---|---|---|---|"]
     for scene in dict.fromkeys(r["scene"] for r in records):
         mine = [r for r in records if r["scene"] == scene]
-        base = _median([r["seconds_per_spp"] for r in mine if r["method"] == methods[0]])
+        base = median([r["seconds_per_spp"] for r in mine if r["method"] == methods[0]])
         for m in methods:
             rows = [r for r in mine if r["method"] == m]
             s = [r["seconds_per_spp"] for r in rows]
             lines.append(f"| {scene} | {m} | {min(r['image_spp'] for r in rows)} | {min(s):.4f}-{max(s):.4f} | "
-                         f"{_median(s) / base:.2f} | {_median([r['other_pass_seconds'] for r in rows]):.2f} | "
-                         f"{_median([r['time_between'] for r in rows]):.2f} |")
+                         f"{median(s) / base:.2f} | {median([r['other_pass_seconds'] for r in rows]):.2f} | "
+                         f"{median([r['time_between'] for r in rows]):.2f} |")
     return "\n".join(lines)
-
-
-def _median(xs):
-    xs = sorted(xs)
-    n = len(xs)
-    return xs[n // 2] if n % 2 else 0.5 * (xs[n // 2 - 1] + xs[n // 2])
 
 
 def main(argv=None):
@@ -97,23 +92,22 @@ def main(argv=None):
         ap.error("--spp must be at least 2, --seeds at least 1, and --methods name one method or more")
     for m in methods:
         check_method(m)
-    paths = [scene_path(s, a.scene_dir) for s in a.scenes.split(",") if s]
+    given = [s for s in a.scenes.split(",") if s]
     records = []
-    for path in paths:
+    for name, path in zip(map(scene_name, given), (scene_path(s, a.scene_dir) for s in given)):
         size = {k: v for k, v in (("width", a.width), ("height", a.height)) if v is not None}
         scene = tracer.load_scene(path, **size)
-        name = os.path.splitext(os.path.basename(path))[0]
-        name = os.path.basename(os.path.dirname(path)) if name == "scene" else name
         for m in methods:
             for r in measure(scene, m, a.spp, range(a.seeds), a.threads):
                 records.append(dict(r, scene=name, width=scene.width, height=scene.height))
                 print(f"{name} {m} seed {r['seed']}: {r['seconds_per_spp']:.4f} s a spp over {r['image_spp']} spp",
                       flush=True)
-    if any(r["nonfinite_samples"] for r in records):
+    nonfinite = any(r["nonfinite_samples"] for r in records)
+    if nonfinite:
         print("bench.method_cost: non-finite samples counted", file=sys.stderr)
     print(table(records, methods))
     atomic.write_json(a.json, records, indent=1)
-    return 1 if any(r["nonfinite_samples"] for r in records) else 0
+    return 1 if nonfinite else 0
 
 
 if __name__ == "__main__":
