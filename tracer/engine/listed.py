@@ -37,7 +37,7 @@ from ..material import _unit_toward
 from ..sampling import dot, frame, to_local, to_world
 from ..shading import BLACK, bsdf_in_mixture, guided_weight, mixture_pdf, offset_point, survival
 from .rows import (ALIVE, BB, BG, BR, DELTA, DEPTH, DX, DY, DZ, G_N, G_VN, H_T, KEY, L_LIGHTS, L_MAX, L_NEE, L_RR,
-                   L_SMOOTH, LB, LG, LR, OX, OY, OZ, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SLOT, SOX, SOY, SOZ, SR,
+                   L_SMOOTH, LR, OX, OY, OZ, PDF, SB, SDX, SDY, SDZ, SG, SHADOW, SLOT, SOX, SOY, SOZ, SR,
                    TL_AREA, TL_EMIT, TL_EPS, TL_SEL, TMAX)
 from .sampling32 import (BLOCK, BOUNCE, D_COIN, D_DIR, D_LIGHT, D_LOBE, D_POS, D_RR, SHORT, alias_column, hash32,
                          rand32, strategy_dim)
@@ -89,7 +89,11 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, s
     alias_i) the rows lanes.shade takes, and lim. rec_at = (record, rec_base): with `record`
     (guiding.records' RECORD_ALL or RECORD_INDIRECT) lane k's vertex is record rec_base + k of the
     guiding.records.Records `rec`, written as the wavefront writes it (record_emission,
-    record_sampled; L0 the slot's radiance in the PathState plus the lane's)."""
+    record_sampled). A recording lane keeps its radiance in the slot's row of the PathState's L
+    (float64) instead of the lane's float32 rows, so that a record's radiance, the difference of the
+    path's radiance at its end and at the vertex, is exactly 0 where nothing came back along its
+    direction (float32 rounding would leave tiny positive values there, which the weight window
+    would take for an estimate of a voxel's outgoing radiance)."""
     geo, tl, kd = rows
     record, rec_base = rec_at
     rr_depth = lim[L_RR]
@@ -139,6 +143,10 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, s
         if p < 0:  # an escape with no environment: the path ends
             continue
         i = li[SLOT, k]
+        if record != RECORD_NONE:  # a recording lane keeps its radiance in L (float64), as the wavefront's
+            for c in range(3):
+                L[i, c] += lf[LR + c, k]
+                lf[LR + c, k] = 0.0
         d = (np.float64(lf[DX, k]), np.float64(lf[DY, k]), np.float64(lf[DZ, k]))
         b1 = np.float64(hit[1, k])
         b2 = np.float64(hit[2, k])
@@ -161,10 +169,13 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, s
                 pl = tl[p, TL_SEL] * th * th / (tl[p, TL_AREA] * cos_o)
                 pp = np.float64(lf[PDF, k]) ** 2
                 we = pp / (pp + pl * pl)
+            le = (np.float64(tl[p, TL_EMIT]), np.float64(tl[p, TL_EMIT + 1]), np.float64(tl[p, TL_EMIT + 2]))
             for c in range(3):
-                lf[LR + c, k] += bt[c] * tl[p, TL_EMIT + c] * we
+                if record != RECORD_NONE:
+                    L[i, c] += bt[c] * le[c] * we
+                else:
+                    lf[LR + c, k] += bt[c] * le[c] * we
             if record != RECORD_NONE and prev_rec[i] >= 0:
-                le = (np.float64(tl[p, TL_EMIT]), np.float64(tl[p, TL_EMIT + 1]), np.float64(tl[p, TL_EMIT + 2]))
                 record_emission(prev_rec[i], record, bt, le, we, np.float64(lf[PDF, k]), r_L0, r_direct, r_plight)
 
         ns = corner_normal(geo, p, b1, b2)
@@ -281,7 +292,7 @@ def shade_listed(lf, li, hit, prim, sh, flags, listed, rows, alias, lim, surf, s
             nb = (nb[0] / qb, nb[1] / qb, nb[2] / qb)
         if record != RECORD_NONE:
             rb = pre if gs.rec_q != 0 else (nb if go else BLACK)
-            L0 = (L[i, 0] + lf[LR, k], L[i, 1] + lf[LG, k], L[i, 2] + lf[LB, k])
+            L0 = (L[i, 0], L[i, 1], L[i, 2])  # the lane's rows are flushed into L while recording
             vx = (not smooth_metal and not dlt and pdf > 0.0, xw, nf, wiw, strategy, node, pdf, pbs, lum(wt) * pdf, rb,
                   L0)
             if record_sampled(i, rec_base + k, vx, prev_rec, pix, r_prev, r_strategy, r_node, r_path, r_pixel, r_pdf,
