@@ -432,10 +432,13 @@ def test_splitting_keeps_one_sample_per_path_and_is_off_while_recording():
     frozen.splitting = WeightWindow(0.0, 1.0, 0.5)
     frozen.splitting.pixel_est = g.splitting.pixel_est
     win = tracer.render(scene, spp=8, guide=frozen, seed=6)
+    frozen.splitting.pixel_est = np.zeros_like(g.splitting.pixel_est)  # no pixel known: no window
+    unknown = tracer.render(scene, spp=8, guide=frozen, seed=6)
     assert off.stats["split_copies"] == 0 and on.stats["split_copies"] > 0
     assert off.stats["window_ended"] == 0 and on.stats["window_ended"] == 0
     assert win.stats["split_copies"] > 0 and win.stats["window_ended"] > 0
-    for r in (off, on, win):
+    assert unknown.stats["split_copies"] == 0 and unknown.stats["window_ended"] == 0
+    for r in (off, on, win, unknown):
         assert_clean(r)
         assert (r.film.count == 8).all()
     assert on.stats["camera_and_bounce_rays"] > off.stats["camera_and_bounce_rays"]
@@ -447,6 +450,46 @@ def test_splitting_keeps_one_sample_per_path_and_is_off_while_recording():
         trace_wave(ctx, WaveBuffers(n, split=True), CameraSource(), Film(w, h), 0, 0, n, st, observe=observe,
                    split=throughput_plan(1.0))
         assert (st.split_copies > 0) == copies
+
+
+def test_pixel_estimate_leaves_out_noisy_pixels():
+    """splitting.pixel_estimate against the same figures written out pixel by pixel here: the 3x3
+    box mean (edges clamped) of a film's luminance, floored at 1% of the image's mean, and 0 where
+    the box mean's standard error (its pixels' variances of the mean over 81, square-rooted) is
+    above PIXEL_REL_ERR of it. The film has grey samples: constant ones in most pixels, a firefly
+    in one (its box neighbours are then too noisy to trust) and nothing in two dark rows (known:
+    no variance, the floor). Detects a box of another size, a missing floor, the error test
+    reversed or scaled, an error taken per pixel instead of per box."""
+    import math
+
+    from tracer.film import Film
+    from tracer.splitting import PIXEL_REL_ERR, pixel_estimate
+
+    w, h, n = 7, 6, 4
+    value = np.ones((h, w))
+    value[:, 3] = 2.0
+    value[4:] = 0.0
+    samples = np.repeat(value[..., None], n, axis=2)  # (h, w, n)
+    samples[2, 1] = [0.0, 0.0, 0.0, 60.0]  # a firefly
+    film = Film(w, h)
+    for k in range(n):
+        rad = np.repeat(samples[..., k].reshape(-1, 1), 3, axis=1)
+        film.add(np.arange(w * h), rad, np.zeros((w * h, film.aov.shape[1]), np.float32))
+    got = pixel_estimate([film], w, h).reshape(h, w)
+    mean = samples.mean(axis=2)
+    var_mean = samples.var(axis=2, ddof=1) / n
+    floor = 0.01 * mean.mean()
+    known = 0
+    for y in range(h):
+        for x in range(w):
+            nb = [(min(max(y + dy, 0), h - 1), min(max(x + dx, 0), w - 1)) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+            est = max(sum(mean[p] for p in nb) / 9.0, floor)
+            err = math.sqrt(sum(var_mean[p] for p in nb)) / 9.0
+            want = est if err <= PIXEL_REL_ERR * est else 0.0
+            assert got[y, x] == pytest.approx(want, rel=1e-6), (y, x)
+            known += want > 0.0
+    assert 0 < known < w * h  # both kinds of pixel are there
+    assert got[1:4, 0:3].max() == 0.0 and got[5, 5] == pytest.approx(floor)
 
 
 @pytest.mark.parametrize("bad", [0.5, -1.0, "2"])
