@@ -6,7 +6,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import kernel
-from ..guiding.records import RECORD_NONE, record_shaded
+from ..guiding.records import RECORD_NONE, record_emission, record_sampled, record_vectors, vertex_record
 from .rows import ALIVE, BR, DELTA, DEPTH, DX, DY, DZ, LR, OX, PDF, SDX, SHADOW, SLOT, SOX, SR, TMAX
 from .vertex import shade_vertex
 
@@ -19,8 +19,9 @@ def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, p
     it, flags[ALIVE], the shadow ray (flags[SHADOW], its value with the throughput in). The
     emission it finds goes into the slot's radiance directly. limits: (max_depth, rr_depth, nee,
     record, rec_base). With `record` (guiding.records' RECORD_ALL or RECORD_INDIRECT), lane k's vertex
-    is record rec_base + k of the guiding.records.Records `rec` (records.record_shaded); the lane's
-    radiance so far moves into the slot's first, so that the record's L0 holds all of it."""
+    is record rec_base + k of the guiding.records.Records `rec` (record_emission, record_sampled,
+    record_vectors); the lane's radiance
+    so far moves into the slot's first, so that the record's L0 holds all of it."""
     max_depth = limits[0]
     rr_depth = limits[1]
     nee = limits[2]
@@ -87,7 +88,12 @@ def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, p
                 sh[SR + q, k] = v.sh_L[q]
             sh[TMAX, k] = v.sh_tmax
         if record != RECORD_NONE:
-            record_shaded(v, L, i, rec_base + k, record, prev_rec, pix, r_prev, r_strategy, r_node, r_path, r_pixel,
-                          r_pdf, r_pb, r_fcos, r_direct, r_plight, r_x, r_n, r_wi, r_L0, r_beta)
+            if v.found and prev_rec[i] >= 0:
+                record_emission(prev_rec[i], record, v.b, v.le, v.w, v.pdf, r_L0, r_direct, r_plight)
+            if v.sampled:
+                vx = vertex_record(v, L, i)
+                if record_sampled(i, rec_base + k, vx, prev_rec, pix, r_prev, r_strategy, r_node, r_path,
+                                  r_pixel, r_pdf, r_pb, r_fcos, r_direct, r_plight):
+                    record_vectors(rec_base + k, vx, r_x, r_n, r_wi, r_L0, r_beta)
 
 

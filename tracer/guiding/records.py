@@ -1,9 +1,8 @@
 """Path vertices recorded for guides that learn, and the radiance that came back along them.
 
 With recording on, the shading kernel writes one record per surface vertex where a direction was
-sampled (`record_emission`, `record_sampled` and `record_vectors`; `record_shaded` calls them for a
-vertex of engine.vertex.shade_vertex: in the wavefront's shade in tracer.integrators.path and the
-lanes' general kernel, the listed kernel calls them itself); once the path has ended,
+sampled (`record_emission`, `record_sampled` and `record_vectors`, from the wavefront's shade in
+tracer.integrators.path and the lanes' listed and general kernels); once the path has ended,
 `finalize_records` turns what the path gathered after the vertex into the radiance along the
 vertex's direction. A guide receives the records of each wave in `observe(records)`.
 """
@@ -137,19 +136,3 @@ def vertex_record(v, L, i):
     """record_sampled's vx from the engine.vertex.Vertex v of path slot i (L0: its radiance L[i])."""
     return (v.recorded, v.x, v.nf, v.wi, v.strategy, v.node, v.pdf_mix, v.pdf_bsdf, v.fcos, v.beta,
             (L[i, 0], L[i, 1], L[i, 2]))
-
-
-@jit(inline="always")
-def record_shaded(v, L, i, r, record, prev_rec, pix, r_prev, r_strategy, r_node, r_path, r_pixel, r_pdf, r_pb, r_fcos,
-                  r_direct, r_plight, r_x, r_n, r_wi, r_L0, r_beta):
-    """What the engine.vertex.Vertex v of path slot i (shaded as record r; `record` RECORD_ALL or
-    RECORD_INDIRECT) leaves in the records: the emission it found, in its path's last record
-    (record_emission), and the vertex itself where it sampled a direction (record_sampled,
-    record_vectors). The r_* arrays are Records' fields, as record_sampled takes them."""
-    if v.found and prev_rec[i] >= 0:
-        record_emission(prev_rec[i], record, v.b, v.le, v.w, v.pdf, r_L0, r_direct, r_plight)
-    if v.sampled:
-        vx = vertex_record(v, L, i)
-        if record_sampled(i, r, vx, prev_rec, pix, r_prev, r_strategy, r_node, r_path, r_pixel, r_pdf, r_pb, r_fcos,
-                          r_direct, r_plight):
-            record_vectors(r, vx, r_x, r_n, r_wi, r_L0, r_beta)
