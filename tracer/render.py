@@ -28,6 +28,7 @@ from .film import Film
 from .guiding import make_guide, warm_up_guides
 from .guiding.base import Guide
 from .integrators import make_integrator
+from .integrators.base import AFTER_PASSES_SECONDS
 from .integrators.path import engine, trace_wave, warm_up_shadows
 from .methods import parse_spec
 from .lights import build_lights
@@ -311,7 +312,7 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         from .denoise import Denoiser, reserve_seconds
 
         denoiser = Denoiser.shared(n_threads, denoise)
-        den_reserve = reserve_seconds(denoiser, crop[2], crop[3])
+        den_reserve = reserve_seconds(denoiser, crop[2], crop[3]) + AFTER_PASSES_SECONDS
     t_compile = _time.perf_counter() - t0 + c_setup
     t_start = _time.perf_counter() - t_setup  # the budget counts the scene set-up, not the compile
     if g is not None:

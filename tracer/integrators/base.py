@@ -13,6 +13,12 @@ tracer/integrators/__init__.py. docs/architecture.md walks through one.
 from ..errors import SettingsError
 from ..methods import check_settings
 
+# Seconds a time budget keeps back, beyond a post-pass step's own timed estimate, for a step that
+# runs to its end (GradNet's inference, the denoiser): right after a budgeted render's last pass
+# such a call took 0.025-0.045 s longer than the same call timed warm before the passes (96 x 96,
+# both steps, the idle 2-core VM; the threads of the render's kernels still hold the cores).
+AFTER_PASSES_SECONDS = 0.04
+
 
 def flag(name, value):
     """A 0/1 setting as an int (bools accepted)."""

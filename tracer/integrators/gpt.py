@@ -13,7 +13,7 @@ import numpy as np
 from .. import gradient
 from ..errors import SettingsError
 from ..result import RenderResult, report_dark
-from .base import Integrator
+from .base import AFTER_PASSES_SECONDS, Integrator
 
 
 class GptIntegrator(Integrator):
@@ -90,6 +90,8 @@ class GptIntegrator(Integrator):
     def reserve(self, width, height):
         self._solve_reserve = gradient.solve_time_estimate(self.recon, width, height, self.recon_alpha,
                                                            self.recon_settings)
+        if self.recon == "gradnet":  # (an L1 solve ends by its share of the budget, an L2 one takes ms)
+            self._solve_reserve += AFTER_PASSES_SECONDS
         return self._solve_reserve
 
     def stats_settings(self):
