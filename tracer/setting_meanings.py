@@ -30,6 +30,8 @@ _WINDOW = {  # the splitting and weight-window settings of every guide that play
               "(0: off; auto: 3 without NEE, off with)",
     "window_low": "weight window: roulette paths expected to bring less than this x their pixel "
                   "(auto: 0.2 without NEE, 0.05 with)",
+    "window_spp": "weight window: final passes play it once the training passes hold this many samples a "
+                  "pixel (0: always)",
 }
 
 _HISTOGRAM = {

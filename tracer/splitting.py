@@ -43,6 +43,11 @@ OUT_MIN_SAMPLES = 8  # camera vertices a leaf needs before its outgoing mean is 
 # films of 2 + 2 spp: relMSE 0.58-2.18 with the window, 0.12-0.14 without, 0.08-0.17 with the
 # reference image as the pixel estimate); such pixels' paths get no window
 PIXEL_REL_ERR = 0.5
+# window_spp's default: the final passes play the window only once the training passes (pilot
+# included) hold this many samples a pixel. On ajar at 5 s photon's films hold 1-4 and the window
+# loses to none (relMSE 0.36-0.46 against 0.12-0.14); with no window below 8, 0.13-0.17 at 5 s,
+# while at 12 s (12-15 spp of films) ajar keeps the window's gain (0.038-0.042 against bsdf's 0.054)
+WINDOW_SPP = 8.0
 
 
 SPLIT_MAX = 8  # copies a path is split into at most
@@ -277,10 +282,13 @@ class WeightWindow:
     resolve() for the render (WINDOW_AUTO, WINDOW_LOW; until then an auto window counts as on, so
     that wave buffers sized before it keep room for copies). `pixel_est` is set by plan() from the
     training passes' image and kept, so that a frozen copy of the guide can plan final passes
-    without training passes of its own."""
+    without training passes of its own. window_spp: the samples a pixel the training passes must
+    hold before the final passes play the window (fewer: no window, `held_back` set by plan())."""
 
-    def __init__(self, split=0.0, window=0.0, window_low=0.0):
+    def __init__(self, split=0.0, window=0.0, window_low=0.0, window_spp=WINDOW_SPP):
         self.split = float(split)
+        self.window_spp = float(window_spp)
+        self.held_back = False
         self.window_auto = window == "auto"
         self.window = WINDOW_AUTO[False] if self.window_auto else float(window)
         self.low_auto = window_low == "auto"
@@ -311,16 +319,18 @@ class WeightWindow:
     def plan(self, outgoing_est, films, crop):
         """The SplitPlan of the final passes, or None (nothing to split by). outgoing_est: the
         guide's per-node outgoing radiance (outgoing()), or None; films: the training passes'
-        films, whose combined image (3x3 box filter of its luminance, at least 1% of the image's
-        mean, so that pixels that happened to get no light yet do not ask for every path to
-        split) becomes the pixel estimate."""
+        films, whose combined image becomes the pixel estimate (pixel_estimate) once they hold
+        window_spp samples a pixel; with fewer the plan has no window (the throughput plan of
+        `split`, if on). No films (a frozen copy): the estimate kept from the last plan."""
         if not self.active:
             return None
         w, h = int(crop[2]), int(crop[3])
         window = None
         if self.window > 0.0 and outgoing_est is not None and (outgoing_est > 0.0).any():
             if films and any(f.count.sum() > 0 for f in films):
-                self.pixel_est = pixel_estimate(films, w, h)
+                held = sum(float(f.count.sum()) for f in films) / (w * h)
+                self.held_back = held < self.window_spp
+                self.pixel_est = None if self.held_back else pixel_estimate(films, w, h)
             if self.pixel_est is not None and self.pixel_est.shape[0] == w * h:
                 window = (np.ascontiguousarray(outgoing_est, dtype=np.float64), self.pixel_est)
         if window is None:
@@ -328,7 +338,8 @@ class WeightWindow:
         return SplitPlan(self.split, window[0], window[1], self.window, self.window_low)
 
     def describe(self):
-        return {"split": self.split, "window": self.window, "window_low": self.window_low}
+        return {"split": self.split, "window": self.window, "window_low": self.window_low,
+                "window_spp": self.window_spp}
 
 
 def pixel_estimate(films, w, h):

@@ -36,7 +36,8 @@ GUIDES = [g for g in guide_names() if hasattr(REGISTRY[g][0], "fixed_state")]  #
 VARIANTS = [(g, {"switch_off": 0}) for g in GUIDES] + [("photon", {"mixing": "eq14"}),
                                                        ("photon", {"light_guiding": 0.5, "switch_off": 0}),
                                                        ("photon", {"split": 1.5, "window": 0.0, "switch_off": 0}),
-                                                       ("photon", {"window": 1.0, "window_low": 0.5, "switch_off": 0}),
+                                                       ("photon", {"window": 1.0, "window_low": 0.5, "window_spp": 0,
+                                                                   "switch_off": 0}),
                                                        ("photon", {"reconstruct": "cnn", "switch_off": 0}),
                                                        ("photon", {"switch_off": 1e-9}),
                                                        ("photon", {"reference_photons": 16.0, "switch_off": 0}),
@@ -44,10 +45,11 @@ VARIANTS = [(g, {"switch_off": 0}) for g in GUIDES] + [("photon", {"mixing": "eq
                                                                 "directional_filter": "box", "switch_off": 0}),
                                                        ("ppg", {"roulette": "path", "records": "survivors",
                                                                 "image": "all", "empty": "bsdf", "switch_off": 0}),
-                                                       ("ppg", {"roulette": "reference", "window": 1.0,
-                                                                "window_low": 0.5, "switch_off": 0}),
+                                                       ("ppg", {"roulette": "reference", "window": 1.0, "window_low": 0.5,
+                                                                "window_spp": 0, "switch_off": 0}),
                                                        ("grid", {"roulette": "late", "switch_off": 0}),
                                                        ("photon", {"records": "unbiased", "switch_off": 0})]
+WINDOW_NOW = {"window_spp": 0}  # the window from the first final pass, whatever the training passes hold
 CASES = [("cornell", 32, 32, 96), ("ajar", 48, 36, 96), ("ajar-textured", 48, 36, 96)]
 N_TESTS = len(CASES) * len(VARIANTS) * 3
 
@@ -98,7 +100,8 @@ def test_nee_off_guides_with_the_reference_roulette_keep_the_mean(guide):
     within a two-sided z-test (Sidak over guides x channels). Detects a roulette, a late draw or a
     record that lost its 1 / q, or a bias of the window's roulette (ppg's window on here)."""
     name, w, h, spp = CASES[0]
-    opts = {"switch_off": 0, "roulette": "auto", **({"window": 1.0, "window_low": 0.5} if guide == "ppg" else {})}
+    opts = {"switch_off": 0, "roulette": "auto",
+            **({"window": 1.0, "window_low": 0.5, "window_spp": 0} if guide == "ppg" else {})}
     g = make_guide(guide, **opts)
     r = tracer.render(_scene(name, w, h), spp=spp, guide=g, integrator="path:nee=0", seed=303)
     b = tracer.render(_scene(name, w, h), spp=4 * spp, integrator="path:nee=0", seed=304)
@@ -282,7 +285,7 @@ def test_frozen_photon_guide_on_ajar_is_unbiased_where_it_acts():
 
     ref, ref_var, _ = load(os.path.join(ROOT, "scenes", "ajar"))
     scene = _scene("ajar", ref.shape[1], ref.shape[0])
-    g = make_guide("photon")
+    g = make_guide("photon", window_spp=0)
     tracer.render(scene, spp=32, guide=g, seed=303)
     r = tracer.render(scene, spp=16, guide=FrozenGuide(g), seed=202)
     assert_clean(r, "frozen photon on ajar")
@@ -304,15 +307,15 @@ def test_photon_render_is_bit_identical_across_threads_and_wave_size_only_limits
     scene = _scene("ajar", 48, 36)
     n0 = numba.get_num_threads()
     try:
-        one = tracer.render(scene, spp=24, guide="photon", seed=3, threads=1)
-        two = tracer.render(scene, spp=24, guide="photon", seed=3, threads=2)
+        one = tracer.render(scene, spp=24, guide="photon", guide_settings=WINDOW_NOW, seed=3, threads=1)
+        two = tracer.render(scene, spp=24, guide="photon", guide_settings=WINDOW_NOW, seed=3, threads=2)
     finally:
         numba.set_num_threads(n0)
     assert_clean(one)
     assert one.stats["split_copies"] > 0 and one.stats["window_ended"] > 0
     np.testing.assert_array_equal(one.image, two.image)
     np.testing.assert_array_equal(one.variance, two.variance)
-    small = tracer.render(scene, spp=24, guide="photon", seed=3, wave_size=997)
+    small = tracer.render(scene, spp=24, guide="photon", guide_settings=WINDOW_NOW, seed=3, wave_size=997)
     assert 0 < small.stats["split_copies"] < one.stats["split_copies"]
     plain = {"split": 0, "window": 0}
     a, b = (tracer.render(scene, spp=24, guide="photon", guide_settings=plain, seed=3, wave_size=w)
@@ -422,7 +425,7 @@ def test_splitting_keeps_one_sample_per_path_and_is_off_while_recording():
 
     name, w, h, _ = CASES[1]
     scene = _scene(name, w, h)
-    g = make_guide("photon", iterations=3)
+    g = make_guide("photon", iterations=3, window_spp=0)
     tracer.render(scene, spp=16, guide=g, seed=5)
     frozen = FrozenGuide(g)
     frozen.splitting = WeightWindow(0.0, 0.0, 0.0)
@@ -490,6 +493,55 @@ def test_pixel_estimate_leaves_out_noisy_pixels():
             known += want > 0.0
     assert 0 < known < w * h  # both kinds of pixel are there
     assert got[1:4, 0:3].max() == 0.0 and got[5, 5] == pytest.approx(floor)
+
+
+def test_window_waits_for_window_spp_samples_a_pixel():
+    """WeightWindow.plan plays the window only once the training films hold window_spp samples a
+    pixel (their counts summed over films, over the pixels): none at 4 of 8 (held_back, no pixel
+    estimate, the throughput plan of `split` or nothing), a window at 4 + 4; a frozen copy (no
+    films) keeps what the last plan decided; window_spp 0 plays it from one sample. Detects a rule
+    reversed, counted per film instead of over the films, or a held-back estimate that a frozen
+    copy still plays."""
+    from tracer.film import Film
+
+    w, h = 6, 5
+    crop = (0, 0, w, h)
+    outgoing = np.ones(4)
+
+    def film(spp):
+        f = Film(w, h)
+        for _ in range(spp):
+            f.add(np.arange(w * h), np.ones((w * h, 3)), np.zeros((w * h, f.aov.shape[1]), np.float32))
+        return f
+
+    for split in (0.0, 2.0):
+        ww = WeightWindow(split, 1.0, 0.5, 8)
+        plan = ww.plan(outgoing, [film(4)], crop)
+        assert ww.held_back and ww.pixel_est is None
+        assert (plan is None) if split == 0.0 else (plan.hi == 0.0 and plan.threshold == split)
+        assert ww.plan(outgoing, [], crop) == plan  # a frozen copy: still no window
+        plan = ww.plan(outgoing, [film(4), film(4)], crop)
+        assert not ww.held_back and plan.hi == 1.0 and plan.pixel_est.shape == (w * h,)
+        frozen = ww.plan(outgoing, [], crop)  # a frozen copy: the window, on the kept estimate
+        assert frozen.hi == 1.0 and frozen.pixel_est is plan.pixel_est
+    ww = WeightWindow(0.0, 1.0, 0.5, 0)
+    assert ww.plan(outgoing, [film(1)], crop).hi == 1.0 and not ww.held_back
+
+
+def test_photon_holds_its_window_back_in_a_short_training():
+    """A photon render whose training passes hold fewer than window_spp samples a pixel plays no
+    window (stats window_held_back, no path ended by it) and the same render with window_spp 0
+    does. Detects the setting not reaching the guide, or a held-back window still played."""
+    name, w, h, _ = CASES[1]
+    scene = _scene(name, w, h)
+    g = make_guide("photon", iterations=3)
+    r = tracer.render(scene, spp=16, guide=g, seed=5)
+    held = sum(p["spp"] for p in r.stats["passes"] if p["kind"] != "final")
+    assert 0 < held < g.splitting.window_spp, "the training held enough samples: this test would test nothing"
+    assert g.stats()["window_held_back"] and r.stats["window_ended"] == 0
+    g0 = make_guide("photon", iterations=3, window_spp=0)
+    r0 = tracer.render(scene, spp=16, guide=g0, seed=5)
+    assert not g0.stats()["window_held_back"] and r0.stats["window_ended"] > 0
 
 
 @pytest.mark.parametrize("bad", [0.5, -1.0, "2"])

@@ -64,10 +64,10 @@ def _float(name, v, lo, hi=math.inf):
 
 def window_settings(s):
     """The splitting.WeightWindow of the settings dict s (`split`; `window`, `window_low`: a number or
-    "auto")."""
+    "auto"; `window_spp`)."""
     hi, low = (v if isinstance(v, str) and v == "auto" else _float(k, v, 0.0)
                for k, v in (("window", s["window"]), ("window_low", s["window_low"])))
-    return WeightWindow(_float("split", s["split"], 0.0), hi, low)
+    return WeightWindow(_float("split", s["split"], 0.0), hi, low, _float("window_spp", s["window_spp"], 0.0))
 
 
 class Guide:

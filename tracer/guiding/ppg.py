@@ -31,7 +31,7 @@ import numpy as np
 
 from ..errors import SettingsError
 from ..film import Film
-from ..splitting import observe_outgoing, outgoing
+from ..splitting import WINDOW_SPP, observe_outgoing, outgoing
 from .base import Guide, _float, _int, window_settings
 from .contract import QUADTREE, empty_state
 from .mixing import VarianceMixing
@@ -50,7 +50,7 @@ class PPGGuide(Guide):
                 "max_depth": 20, "alpha": 0.8, "direct": 0, "learn_alpha": 1, "alpha_min": 0.2, "alpha_max": 0.8,
                 "mis_min_samples": 32, "switch_off": 1.0, "spatial_filter": "nearest", "directional_filter": "nearest",
                 "roulette": "auto", "records": "unbiased", "split_spp": 2, "image": "all", "empty": "uniform",
-                "split": 0.0, "window": 3.0, "window_low": "auto"}
+                "split": 0.0, "window": 3.0, "window_low": "auto", "window_spp": WINDOW_SPP}
     FILTERS = {"spatial_filter": ("nearest", "stochastic"), "directional_filter": ("nearest", "box"),
                "image": ("all", "final"), "empty": ("bsdf", "uniform")}
     fixed_bytes = 64 << 20
@@ -235,7 +235,8 @@ class PPGGuide(Guide):
     def stats(self):
         out = dict(self.info)
         out.update({"name": self.name, "iterations_done": self.iteration, "settings": dict(self.settings),
-                    "lit_share": [round(lit / max(n, 1), 5) for n, lit in self.info["records"]]})
+                    "lit_share": [round(lit / max(n, 1), 5) for n, lit in self.info["records"]],
+                    "window_held_back": bool(self.splitting.held_back)})
         if self._mixing is not None:
             out["predicted_ratios"] = [round(r, 4) for r in self._mixing.ratios]
         t = self.grid

@@ -67,7 +67,7 @@ from numba import prange
 from ..._jit import jit, kernel
 from ...errors import SettingsError
 from ...film import Film
-from ...splitting import observe_outgoing, outgoing
+from ...splitting import WINDOW_SPP, observe_outgoing, outgoing
 from ..base import Guide, _float, _int, window_settings
 from ..directional import build_tables
 from .photons import env_aim, trace_photons
@@ -96,6 +96,7 @@ COMMON = {
     "split": 0.0,  # > 0: final passes split paths whose throughput exceeds this (tracer.splitting); 0: off
     "window": 0.0,  # > 0: final passes' weight window splits paths expected to bring more than this x their pixel
     "window_low": 0.2,  # ... and rouletted those expected to bring less than this x their pixel
+    "window_spp": WINDOW_SPP,  # ... once the training passes hold this many samples a pixel (0: always)
     "switch_off": 1.0,  # > 0: final passes sample the BSDF alone where the guide predicts less gain (see finish_training)
     "roulette": "auto",  # Russian roulette of the guide's passes (guiding.base.ROULETTES): auto, reference without NEE
     "records": "survivors",  # what a camera record holds past the roulette (guiding.base.RECORD_KINDS)
@@ -305,7 +306,8 @@ class HistogramGuide(Guide):
         out = dict(self.info, predicted_ratios=[round(r, 4) for r in self._mixing.ratios])
         out.update({"name": self.name, "iterations_done": self.iteration, "settings": dict(self.settings),
                     "reconstruct": self.reconstructor.describe(),
-                    "maps_inferred": int(self.reconstructor.maps_inferred)})
+                    "maps_inferred": int(self.reconstructor.maps_inferred),
+                    "window_held_back": bool(self.splitting.held_back)})
         if g is not None:
             leaves = g.leaves()
             out.update({"cells": int(g.n_cells), "nodes": int(g.n_nodes), "voxels": int(leaves.size),
