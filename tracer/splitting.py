@@ -33,6 +33,7 @@ from ._jit import jit, kernel
 from .errors import SettingsError
 from .film import combine_films
 from .guiding.contract import find_voxel
+from .lights import luminance
 from .rng import split_key, uniform
 from .sampling import triangle_point
 
@@ -327,8 +328,8 @@ class WeightWindow:
         w, h = int(crop[2]), int(crop[3])
         window = None
         if self.window > 0.0 and outgoing_est is not None and (outgoing_est > 0.0).any():
-            if films and any(f.count.sum() > 0 for f in films):
-                held = sum(float(f.count.sum()) for f in films) / (w * h)
+            held = sum(float(f.count.sum()) for f in films) / (w * h)  # samples a pixel
+            if held > 0.0:
                 self.held_back = held < self.window_spp
                 self.pixel_est = None if self.held_back else pixel_estimate(films, w, h)
             if self.pixel_est is not None and self.pixel_est.shape[0] == w * h:
@@ -336,10 +337,6 @@ class WeightWindow:
         if window is None:
             return throughput_plan(self.split) if self.split > 0.0 else None
         return SplitPlan(self.split, window[0], window[1], self.window, self.window_low)
-
-    def describe(self):
-        return {"split": self.split, "window": self.window, "window_low": self.window_low,
-                "window_spp": self.window_spp}
 
 
 def pixel_estimate(films, w, h):
@@ -349,10 +346,9 @@ def pixel_estimate(films, w, h):
     paths get no window) where the box mean's standard error exceeds PIXEL_REL_ERR of it, the
     channels' errors taken as fully correlated. None where the image is black."""
     image, var, _ = combine_films(films, ["train"] * len(films))
-    lw = np.array([0.2126, 0.7152, 0.0722])
-    lum = image[..., :3] @ lw
+    lum = luminance(image[..., :3])
     lum = np.where(np.isfinite(lum), np.maximum(lum, 0.0), 0.0)
-    sd = np.sqrt(np.where(np.isfinite(var[..., :3]), np.maximum(var[..., :3], 0.0), np.inf)) @ lw
+    sd = luminance(np.sqrt(np.where(np.isfinite(var[..., :3]), np.maximum(var[..., :3], 0.0), np.inf)))
     floor = 0.01 * float(lum.mean())
     if not floor > 0.0:
         return None

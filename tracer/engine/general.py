@@ -20,8 +20,8 @@ def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, p
     emission it finds goes into the slot's radiance directly. limits: (max_depth, rr_depth, nee,
     record, rec_base). With `record` (guiding.records' RECORD_ALL or RECORD_INDIRECT), lane k's vertex
     is record rec_base + k of the guiding.records.Records `rec` (record_emission, record_sampled,
-    record_vectors); the lane's radiance
-    so far moves into the slot's first, so that the record's L0 holds all of it."""
+    record_vectors); the lane's radiance so far moves into the slot's first, so that the record's
+    L0 holds all of it."""
     max_depth = limits[0]
     rr_depth = limits[1]
     nee = limits[2]
