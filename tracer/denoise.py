@@ -69,6 +69,9 @@ class Denoiser:
         import pyoidn
 
         self._seconds = {}
+        # (width, height) -> seconds the last call after a render's passes took (apply): what the
+        # next budget at that size keeps back for it
+        self.after_passes = {}
         self._prepared = {}  # (height, width, albedo given, normal given) -> _Prepared, oldest first
         self._lock = threading.Lock()
         self.filters_built = 0
@@ -224,6 +227,7 @@ def apply(result, denoiser):
         out[bad] = result.image[bad]
     result.denoised = out
     dt = time.perf_counter() - t0
+    denoiser.after_passes[result.image.shape[1], result.image.shape[0]] = dt
     result.stats["time_denoise"] = dt
     result.stats["time_total"] += dt
     result.stats["nonfinite_denoised"] = int(bad.sum())

@@ -312,7 +312,9 @@ def _render(scene, spp, time, guide, max_depth, rr_depth, seed, accel, n_threads
         from .denoise import Denoiser, reserve_seconds
 
         denoiser = Denoiser.shared(n_threads, denoise)
-        den_reserve = reserve_seconds(denoiser, crop[2], crop[3]) + AFTER_PASSES_SECONDS
+        den_reserve = denoiser.after_passes.get((crop[2], crop[3]))  # the last budget's call at this size
+        if den_reserve is None:
+            den_reserve = reserve_seconds(denoiser, crop[2], crop[3]) + AFTER_PASSES_SECONDS
     t_compile = _time.perf_counter() - t0 + c_setup
     t_start = _time.perf_counter() - t_setup  # the budget counts the scene set-up, not the compile
     if g is not None:
