@@ -9,7 +9,7 @@ from scipy import stats as sstats
 import tracer
 from tracer import bsdfs
 from tracer.gradient.shift import half_vector_shift, reconnection
-from tests.gradient.zscores import gradient_z, scene_gradient_z
+from tests.gradient.zscores import ROOT, gradient_z, scene_gradient_z
 from tracer.testing.stats import z_critical
 
 # material 0: rough conductor, 1: rough dielectric (ior 1.5), 2: plastic, 3: mirror, 4: smooth glass
@@ -205,3 +205,70 @@ def test_hybrid_gradients_are_unbiased_on_glossy_plates_under_small_lights(direc
         chi = float(np.sum(z * z))
         assert chi < sstats.chi2.isf(0.01 / 4, m), f"veach-mis {key}: sum z^2 = {chi:.0f} over {m} pixels"
         assert abs(z.mean()) * np.sqrt(m) < z_critical(4, 0.01), f"veach-mis {key}: mean z {z.mean():.3f}"
+
+
+def test_packet_queries_answer_as_the_batch_calls(monkeypatch):
+    """The hybrid wave's ray queries beyond the base's hits (the offsets' own rays, their
+    reconnections' visibility, the base's and offsets' shadow rays) answered in place by
+    embree.intersect_listed / occluded_listed (PacketQueries) against the same queries gathered
+    into the accel's batch calls and scattered back (BatchQueries): the same gradients and images
+    bit for bit, and the same ray counts, on `ajar` (blocked reconnections) and `caustic` (copied
+    offsets through glass). Detects a ray lost, read from the wrong row, answered for the wrong
+    offset, or a tmax or visibility mistaken."""
+    from tests import scenes
+    from tracer.gradient import hybrid
+
+    for name in ("ajar", "caustic"):
+        scene = scenes.builtin(ROOT, name, 24, 24)
+        kw = dict(spp=2, seed=4, integrator="gpt", recon="none", progress=False)
+        packet = tracer.render(scene, **kw)
+        with monkeypatch.context() as m:
+            m.setattr(hybrid, "_queries", lambda accel, buf, hb: hybrid.BatchQueries(accel, buf, hb))
+            batch = tracer.render(scene, **kw)
+        assert packet.stats["camera_and_bounce_rays"] == batch.stats["camera_and_bounce_rays"]
+        assert packet.stats["shadow_rays"] == batch.stats["shadow_rays"]
+        for key in ("base", "dx", "dy", "direct"):
+            assert np.array_equal(packet.buffers[key], batch.buffers[key]), f"{name} {key}"
+
+
+def test_a_waves_gradient_samples_land_as_film_add_puts_them():
+    """gradient.films.add_gradients (one kernel over the five films) against the films filled
+    by film.Film.add written out in the test: the base, direct and indirect samples in their
+    pixels, dx at (x, y) the +x sample of (x, y) and minus the -x sample of (x + 1, y), dy likewise,
+    the gradients scaled; every sum, square sum, count and AOV equal bit for bit (np.add.at adds in
+    order, as the kernel must). Detects a gradient put in the wrong pixel or film, a sign or scale
+    lost, an edge pixel's sample kept, or samples summed out of order."""
+    from types import SimpleNamespace
+
+    from tracer.film import N_AOV, Film
+    from tracer.gradient.films import GradientFilms, add_gradients
+
+    rng = np.random.default_rng(7)
+    w, h, n = 7, 5, 400
+    pix = rng.integers(0, w * h, n)
+    L, L_cam = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    aov, G = rng.normal(size=(n, N_AOV)), rng.normal(size=(n, 4, 3))
+    buf = SimpleNamespace(index=pix, L=L, L_cam=L_cam, aov=aov)
+    films = GradientFilms(w, h)
+    add_gradients(SimpleNamespace(crop=(0, 0, w, h)), buf, films, n, G, 2.0)
+
+    def film(parts):
+        f = Film(w, h, aovs=False)
+        for p, v in parts:
+            np.add.at(f.count, p, 1.0)
+            np.add.at(f.sum, p, v)
+            np.add.at(f.sumsq, p, v * v)
+        return f
+
+    x, y = pix % w, pix // w
+    want = {"base": film([(pix, L)]), "direct": film([(pix, L_cam)]), "indirect": film([(pix, L - L_cam)]),
+            "dx": film([(pix, 2.0 * G[:, 0]), (pix[x >= 1] - 1, -(2.0 * G[x >= 1, 1]))]),
+            "dy": film([(pix, 2.0 * G[:, 2]), (pix[y >= 1] - w, -(2.0 * G[y >= 1, 3]))])}
+    for name, f in want.items():
+        got = getattr(films, name)
+        for a in ("count", "sum", "sumsq"):
+            assert np.array_equal(getattr(got, a), getattr(f, a)), f"{name}.{a}"
+    want_aov = np.zeros((w * h, N_AOV))
+    np.add.at(want_aov, pix, aov)
+    assert np.array_equal(films.base.aov, want_aov)
+    assert films.dx.aov.shape[1] == 0

@@ -294,6 +294,89 @@ def _occluded(fn, scene, centre, org, dirs, tmax, scratch, out):
                 out[base + k] = lane_occluded(buf, ib, k)
 
 
+@kernel
+def intersect_listed(fn, scene, plane, centre, refine, scratch, idx, per, rays, hits):
+    """Closest hits of the flagged rays of rows: ray j = idx[a] * per + o (a over idx, o in
+    0 .. per-1) where todo[j], rays = (todo, org, dirs); into hits = (t, prim, b1, b2)[j], as
+    EmbreeAccel.intersect answers them (t inf and prim -1 on a miss or an invalid ray; the others
+    untouched). Each chunk of idx fills its packets with the next 16 flagged rays it finds.
+    Returns how many were flagged."""
+    todo, org, dirs = rays
+    t, prim, b1, b2 = hits
+    L = _LANES
+    nch = scratch.shape[0]
+    nq = idx.shape[0] * per
+    flagged = 0
+    for c in prange(nch):
+        buf = scratch[c]
+        ib = buf.view(np.int32)
+        addr = buf.ctypes.data
+        lane = np.empty(L, np.int64)
+        f = 0
+        hi = (c + 1) * nq // nch
+        for q in range(c * nq // nch, hi + 1):
+            if q < hi:
+                j = idx[q // per] * per + q % per
+                if todo[j]:
+                    flagged += 1
+                    t[j] = np.inf
+                    prim[j] = -1
+                    b1[j] = 0.0
+                    b2[j] = 0.0
+                    if f == 0:
+                        clear_packet(ib)
+                    if load_lane(buf, ib, f, org, dirs, j, centre, np.inf):
+                        lane[f] = j
+                        f += 1
+            if f == L or (q == hi and f > 0):
+                call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
+                for k in range(f):
+                    read_hit(buf, ib, k, refine, plane, org, dirs, t, prim, b1, b2, lane[k])
+                f = 0
+    return flagged
+
+
+@kernel
+def occluded_listed(fn, scene, centre, scratch, idx, per, rays, out, on_blocked, on_clear, keep_clear):
+    """Any-hit queries of the flagged rays of rows (idx, per as intersect_listed; rays = (todo, org,
+    dirs, tmax)): out[j] = on_blocked where ray j is blocked, else on_clear (left as it is if
+    keep_clear). An invalid ray is clear, as in EmbreeAccel.occluded. Returns how many were
+    flagged."""
+    todo, org, dirs, tmax = rays
+    L = _LANES
+    nch = scratch.shape[0]
+    nq = idx.shape[0] * per
+    flagged = 0
+    for c in prange(nch):
+        buf = scratch[c]
+        ib = buf.view(np.int32)
+        addr = buf.ctypes.data
+        lane = np.empty(L, np.int64)
+        f = 0
+        hi = (c + 1) * nq // nch
+        for q in range(c * nq // nch, hi + 1):
+            if q < hi:
+                j = idx[q // per] * per + q % per
+                if todo[j]:
+                    flagged += 1
+                    if f == 0:
+                        clear_packet(ib)
+                    if load_lane(buf, ib, f, org, dirs, j, centre, tmax[j]):
+                        lane[f] = j
+                        f += 1
+                    elif not keep_clear:
+                        out[j] = on_clear
+            if f == L or (q == hi and f > 0):
+                call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
+                for k in range(f):
+                    if lane_occluded(buf, ib, k):
+                        out[lane[k]] = on_blocked
+                    elif not keep_clear:
+                        out[lane[k]] = on_clear
+                f = 0
+    return flagged
+
+
 def _scratch():
     """(_CHUNKS, _WORDS) float32 rows, each 64-byte aligned (RTCRayHit16's alignment)."""
     raw = np.zeros(_CHUNKS * _WORDS + 16, np.float32)

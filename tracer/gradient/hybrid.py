@@ -56,10 +56,12 @@ import time as _time
 
 import numpy as np
 
+from ..bvh.embree import _INTERSECT16, _OCCLUDED16, intersect_listed, occluded_listed
+from ..bvh.numba_bvh import _NumbaThreads
 from ..integrators.path import MAX_BOUNCES
 from ..rng import no_primary_samples
 from ..sources import CameraSource
-from ..wave import sanitize
+from ..wave import compact, sanitize
 from .films import add_gradients
 from .offsets import BLOCKED, HybridBuffers, shift_offsets, start_offsets
 from .offset_shading import ShiftLimits, add_next_event, shade_hybrid
@@ -80,6 +82,9 @@ def warm_up(ctx, buf, roughness, direct_roughness):
                   hb.offsets())
     _shade(ctx, buf, hb, idx, buf.ray_d[:0], (t, prim, b1, b2), no_primary_samples(), roughness, direct_roughness)
     _add_next_event(buf, hb, idx)
+    queries = _queries(ctx.accel, buf, hb)
+    queries.offset_rays(idx)
+    queries.shadows(idx, 0)
 
 
 def _shade(ctx, buf, hb, active, rd, hits, ps, roughness, direct_roughness):
@@ -92,6 +97,86 @@ def _add_next_event(buf, hb, active):
     add_next_event(active, buf.shadow_rays(), buf.L, buf.L_cam, hb.G, hb.nee_terms())
 
 
+class BatchQueries:
+    """The ray queries of a bounce beyond the base's closest hits, through the accel's batch calls
+    (any accel): the flagged rays gathered, answered, scattered back."""
+
+    def __init__(self, accel, buf, hb):
+        self.accel, self.buf, self.hb = accel, buf, hb
+
+    def offset_rays(self, active):
+        """The offsets' own rays (their hits into hb.hit_*) and their reconnections' visibility
+        (a blocked one's status BLOCKED): (rays, shadow rays) traced."""
+        accel, hb = self.accel, self.hb
+        pi, po = np.nonzero(hb.trace[active])
+        if pi.size:
+            sl = active[pi]
+            ht, hp, h1, h2 = accel.intersect(hb.ray_o[sl, po], hb.ray_d[sl, po])
+            hb.hit_t[sl, po], hb.hit_prim[sl, po], hb.hit_b1[sl, po], hb.hit_b2[sl, po] = ht, hp, h1, h2
+        ri, ro_ = np.nonzero(hb.reconn[active])
+        if ri.size:
+            sl = active[ri]
+            occ = accel.occluded(hb.ray_o[sl, ro_], hb.ray_d[sl, ro_], hb.tmax[sl, ro_])
+            hb.status[sl[occ], ro_[occ]] = BLOCKED
+        return pi.size, ri.size
+
+    def shadows(self, active, na):
+        """The shadow rays of the base (entries 0 .. na-1 of the wave) and of the offsets: their
+        visibility into hb.vis_b and hb.vis; how many were traced."""
+        buf, hb = self.buf, self.hb
+        kb = np.flatnonzero(buf.has_shadow[:na])
+        si, so = np.nonzero(hb.sh[active])
+        ss = active[si]
+        if kb.size + si.size:
+            org = np.concatenate([buf.sh_o[kb], hb.sh_o[ss, so]])
+            dirs = np.concatenate([buf.sh_d[kb], hb.sh_d[ss, so]])
+            tmax = np.concatenate([buf.sh_tmax[kb], hb.sh_tmax[ss, so]])
+            vis = ~self.accel.occluded(org, dirs, tmax)
+            hb.vis_b[kb] = vis[:kb.size]
+            hb.vis[ss, so] = vis[kb.size:]
+        return kb.size + si.size
+
+
+class PacketQueries(BatchQueries):
+    """The same queries answered where the rays lie (Embree): each kernel walks the wave's paths
+    and hands their flagged rays to rtcIntersect16 / rtcOccluded16 16 at a time, no gather or
+    scatter in numpy."""
+
+    def __init__(self, accel, buf, hb):
+        super().__init__(accel, buf, hb)
+        self.scene, self.plane, self.centre, self.refine, self.scratch = accel.packet_args()
+        flat = lambda a: a.reshape((-1,) + a.shape[2:])  # noqa: E731  (path i's offset o at row 4 i + o)
+        self.own = (flat(hb.trace), flat(hb.ray_o), flat(hb.ray_d))
+        self.hits = (flat(hb.hit_t), flat(hb.hit_prim), flat(hb.hit_b1), flat(hb.hit_b2))
+        self.reconn = (flat(hb.reconn), flat(hb.ray_o), flat(hb.ray_d), flat(hb.tmax))
+        self.status = flat(hb.status)
+        self.off_sh = (flat(hb.sh), flat(hb.sh_o), flat(hb.sh_d), flat(hb.sh_tmax))
+        self.vis = flat(hb.vis)
+        self.base_sh = (buf.has_shadow, buf.sh_o, buf.sh_d, buf.sh_tmax)
+        self.positions = np.arange(buf.size)
+        self.threads = accel.threads
+
+    def offset_rays(self, active):
+        with _NumbaThreads(self.threads):
+            rays = intersect_listed(_INTERSECT16, self.scene, self.plane, self.centre, self.refine, self.scratch,
+                                    active, 4, self.own, self.hits)
+            shadow = occluded_listed(_OCCLUDED16, self.scene, self.centre, self.scratch, active, 4, self.reconn,
+                                     self.status, np.int8(BLOCKED), np.int8(0), True)
+        return rays, shadow
+
+    def shadows(self, active, na):
+        with _NumbaThreads(self.threads):
+            traced = occluded_listed(_OCCLUDED16, self.scene, self.centre, self.scratch, self.positions[:na], 1,
+                                     self.base_sh, self.hb.vis_b, False, True, False)
+            traced += occluded_listed(_OCCLUDED16, self.scene, self.centre, self.scratch, active, 4, self.off_sh,
+                                      self.vis, False, True, False)
+        return traced
+
+
+def _queries(accel, buf, hb):
+    return (PacketQueries if hasattr(accel, "packet_args") else BatchQueries)(accel, buf, hb)
+
+
 def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness, direct_roughness):
     """Trace paths g0 .. g0+n-1 of a pass (base and four offsets, hybrid shift) and add them to
     `films` (films.GradientFilms). buf: a WaveBuffers, hb: HybridBuffers, both of at least n;
@@ -102,13 +187,17 @@ def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness, dir
     ps = _CAMERA.start(ctx, buf, sample0, g0, n)
     start_offsets(ctx.cam, ctx.scene.width, ctx.scene.height, ctx.crop, ctx.jitter, ps, buf.key[:n], buf.pix[:n],
                   hb.offsets())
-    active = np.arange(n)
+    cur, spare = buf.active, buf.active2  # the paths still going (their slots), and the next bounce's
+    cur[:n] = np.arange(n)
+    na = n
     surf = ctx.surfaces
+    cont, shr, queue = buf.continuation(), buf.shadow_rays(), buf.shadow_queue()
+    queries = _queries(accel, buf, hb)
     t0 = stats.tick("camera", t0)
     for bounce in range(MAX_BOUNCES + 1):
-        na = active.shape[0]
         if na == 0:
             break
+        active = cur[:na]
         ro, rd = buf.ray_o[:na], buf.ray_d[:na]
         t, prim, b1, b2 = accel.intersect(ro, rd)
         stats.rays += na
@@ -117,43 +206,23 @@ def trace_hybrid_wave(ctx, buf, hb, films, sample0, g0, n, stats, roughness, dir
             shift_offsets(active, (t, prim, b1, b2), rd, surf, ctx.guide_state, float(roughness), hb.base(), hb.offsets())
             t0 = stats.tick("shift", t0)
         # The offsets' own rays, and the visibility of their reconnections
-        pi, po = np.nonzero(hb.trace[active])
-        if pi.size:
-            sl = active[pi]
-            ht, hp, h1, h2 = accel.intersect(hb.ray_o[sl, po], hb.ray_d[sl, po])
-            hb.hit_t[sl, po], hb.hit_prim[sl, po], hb.hit_b1[sl, po], hb.hit_b2[sl, po] = ht, hp, h1, h2
-            stats.rays += pi.size
-        ri, ro_ = np.nonzero(hb.reconn[active])
-        if ri.size:
-            sl = active[ri]
-            occ = accel.occluded(hb.ray_o[sl, ro_], hb.ray_d[sl, ro_], hb.tmax[sl, ro_])
-            hb.status[sl[occ], ro_[occ]] = BLOCKED
-            stats.shadow_rays += ri.size
+        rays, shadow_rays = queries.offset_rays(active)
+        stats.rays += rays
+        stats.shadow_rays += shadow_rays
         t0 = stats.tick("intersect", t0)
         _shade(ctx, buf, hb, active, rd, (t, prim, b1, b2), ps, roughness, direct_roughness)
         t0 = stats.tick("shade", t0)
-        # Shadow rays: the base's, then the offsets' own; then the NEE terms with their weights
-        kb = np.flatnonzero(buf.has_shadow[:na])
-        si, so = np.nonzero(hb.sh[active])
-        ss = active[si]
-        if kb.size + si.size:
-            org = np.concatenate([buf.sh_o[kb], hb.sh_o[ss, so]])
-            dirs = np.concatenate([buf.sh_d[kb], hb.sh_d[ss, so]])
-            tmax = np.concatenate([buf.sh_tmax[kb], hb.sh_tmax[ss, so]])
-            vis = ~accel.occluded(org, dirs, tmax)
-            stats.shadow_rays += kb.size + si.size
-            hb.vis_b[kb] = vis[:kb.size]
-            hb.vis[ss, so] = vis[kb.size:]
+        # Shadow rays: the base's and the offsets' own; then the NEE terms with their weights
+        shadow_rays = queries.shadows(active, na)
+        if shadow_rays:
+            stats.shadow_rays += shadow_rays
             t0 = stats.tick("occluded", t0)
             _add_next_event(buf, hb, active)
             t0 = stats.tick("shade", t0)
-        keep = buf.alive[:na]
-        m = int(np.count_nonzero(keep))
-        buf.ray_o[:m] = buf.next_o[:na][keep]
-        buf.ray_d[:m] = buf.next_d[:na][keep]
-        active = active[keep]
+        na = int(compact(active, cont, shr, (spare, buf.ray_o, buf.ray_d), queue)[0])
+        cur, spare = spare, cur
         t0 = stats.tick("compact", t0)
     stats.nonfinite += sanitize(buf.L[:n]) + sanitize(hb.G[:n].reshape(-1, 3))
-    add_gradients(ctx, buf, films, n, 2.0 * hb.G[:n])
+    add_gradients(ctx, buf, films, n, hb.G[:n], 2.0)
     stats.samples += n
     stats.tick("film", t0)
