@@ -8,12 +8,18 @@ before these passes; with the replay shift the base and offset paths then sample
 mixture (each is a path-traced sample of its own pixel, so their difference estimates the
 gradient without bias). The training passes' films are not part of the image.
 """
+import time
+
 import numpy as np
 
 from .. import gradient
 from ..errors import SettingsError
 from ..result import RenderResult, report_dark
 from .base import AFTER_PASSES_SECONDS, Integrator
+
+
+# GradNet's seconds after a render's passes, by (recon, settings, alpha, width, height): the last call's
+_AFTER_PASSES = {}
 
 
 class GptIntegrator(Integrator):
@@ -87,11 +93,22 @@ class GptIntegrator(Integrator):
             return ("offset_shading.shade_hybrid", "offsets.shift_offsets", "offset_shading.add_next_event")
         return super().kernels()
 
+    def _reserve_key(self, width, height):
+        return self.recon, repr(sorted(self.recon_settings.items())), self.recon_alpha, int(width), int(height)
+
     def reserve(self, width, height):
-        self._solve_reserve = gradient.solve_time_estimate(self.recon, width, height, self.recon_alpha,
-                                                           self.recon_settings)
-        if self.recon == "gradnet":  # (an L1 solve ends by its share of the budget, an L2 one takes ms)
-            self._solve_reserve += AFTER_PASSES_SECONDS
+        """The solve's share of a budget. GradNet's: what its last call after a render's passes took
+        at this size and these settings (its first call after the passes is slower than the timed
+        estimate: the threads the passes left wake up), else the estimate plus AFTER_PASSES_SECONDS.
+        (An L1 solve ends by its share of the budget, an L2 one takes ms.)"""
+        last = _AFTER_PASSES.get(self._reserve_key(width, height)) if self.recon == "gradnet" else None
+        if last is not None:
+            self._solve_reserve = last
+        else:
+            self._solve_reserve = gradient.solve_time_estimate(self.recon, width, height, self.recon_alpha,
+                                                               self.recon_settings)
+            if self.recon == "gradnet":
+                self._solve_reserve += AFTER_PASSES_SECONDS
         return self._solve_reserve
 
     def stats_settings(self):
@@ -139,8 +156,11 @@ class GptIntegrator(Integrator):
         deadline = None if session.time is None else \
             session.t_start + session.time - (session.reserve - self._solve_reserve)
         info = {}
+        t0 = time.perf_counter()
         image, buffers, t_solve = gradient.solve(films, self.recon, self.recon_alpha, self.recon_settings, deadline,
                                                  info)
+        if self.recon == "gradnet":  # (the buffers' means and variances included)
+            _AFTER_PASSES[self._reserve_key(films.base.width, films.base.height)] = time.perf_counter() - t0
         st = snapshot()
         st["interrupted"] = interrupted
         for p_entry in st["passes"]:
