@@ -461,7 +461,8 @@ def test_numba_keeps_a_parallel_loops_writes_only_into_fields_bound_one_per_line
     Numba, a parallel loop loses its writes into arrays unpacked from a NamedTuple argument in one
     tuple assignment (`beta, alive = pair`), and into fields written through the tuple inside the
     loop (`pair.alive[k] = True`), while the fields bound one per statement (`alive = pair.alive`)
-    keep them all, as do arrays passed one by one. Detects a Numba release that loses the writes of
+    keep them all, as do arrays passed one by one and a helper Numba calls (not `inline="always"`)
+    that unpacks the tuple itself. Detects a Numba release that loses the writes of
     the one-per-line binding (the kernels would need their arrays one by one again); if only the
     last assertions fail, a release fixed the other two forms."""
     from typing import NamedTuple
@@ -499,12 +500,24 @@ def test_numba_keeps_a_parallel_loops_writes_only_into_fields_bound_one_per_line
             pair.beta[active[k], 0] = 2.0
             pair.alive[k] = True
 
+    @njit(cache=False)
+    def put(pair, i, k):
+        beta, alive = pair
+        beta[i, 0] = 2.0
+        alive[k] = True
+
+    @njit(parallel=True, cache=False)
+    def called_helper(active, pair):
+        for k in prange(active.shape[0]):
+            put(pair, active[k], k)
+
     active = np.arange(0, 1000, 2)
-    a, b, c, d = (Pair(np.zeros((1000, 3)), np.zeros(1000, np.bool_)) for _ in range(4))
+    a, b, c, d, e = (Pair(np.zeros((1000, 3)), np.zeros(1000, np.bool_)) for _ in range(5))
     one_per_line(active, a)
     one_by_one(active, *b)
     unpacked(active, c)
     through_the_tuple(active, d)
-    for kept in (a, b):
+    called_helper(active, e)  # a helper Numba calls rather than inlines may unpack (gradient.films._add)
+    for kept in (a, b, e):
         assert kept.alive.sum() == 500 and kept.beta[:, 0].sum() == 1000.0
     assert c.alive.sum() < 500 and d.alive.sum() < 500, "Numba kept these writes: see the docstring"

@@ -301,8 +301,13 @@ def intersect_listed(fn, scene, plane, centre, refine, scratch, idx, per, rays, 
     EmbreeAccel.intersect answers them (t inf and prim -1 on a miss or an invalid ray; the others
     untouched). Each chunk of idx fills its packets with the next 16 flagged rays it finds.
     Returns how many were flagged."""
-    todo, org, dirs = rays
-    t, prim, b1, b2 = hits
+    todo = rays[0]
+    org = rays[1]
+    dirs = rays[2]
+    t = hits[0]
+    prim = hits[1]
+    b1 = hits[2]
+    b2 = hits[3]
     L = _LANES
     nch = scratch.shape[0]
     nq = idx.shape[0] * per
@@ -342,7 +347,10 @@ def occluded_listed(fn, scene, centre, scratch, idx, per, rays, out, on_blocked,
     dirs, tmax)): out[j] = on_blocked where ray j is blocked, else on_clear (left as it is if
     keep_clear). An invalid ray is clear, as in EmbreeAccel.occluded. Returns how many were
     flagged."""
-    todo, org, dirs, tmax = rays
+    todo = rays[0]
+    org = rays[1]
+    dirs = rays[2]
+    tmax = rays[3]
     L = _LANES
     nch = scratch.shape[0]
     nq = idx.shape[0] * per

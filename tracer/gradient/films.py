@@ -37,9 +37,11 @@ def add_gradients(ctx, buf, films, n, G, scale=1.0):
               tuple(arrays(getattr(films, name)) for name in GradientFilms.NAMES), numba.get_num_threads())
 
 
-@jit(inline="always")
+@jit
 def _add(film, p, v0, v1, v2, aov, i):
-    """One sample of value (v0, v1, v2) (and the AOVs of sample i, where the film keeps them)."""
+    """One sample of value (v0, v1, v2) (and the AOVs of sample i, where the film keeps them).
+    Called, not inlined by Numba (LLVM inlines it): a helper inlined into a parallel loop that
+    unpacks a tuple of arrays loses its writes on the pinned Numba (tests/test_seams.py)."""
     count, s, sq, a = film
     count[p] += 1.0
     s[p, 0] += v0
@@ -58,7 +60,11 @@ def _add_wave(pix, full, cam, aov, G, scale, cw, films, parts):
     twice, so that every pixel of every film receives its samples in the order film.Film.add gives
     them (base, direct and indirect, then +x and +y, then -x and -y from the neighbour): the sums
     of one film.Film.add per film and offset, bit for bit."""
-    base, indirect, direct, dx, dy = films
+    base = films[0]
+    indirect = films[1]
+    direct = films[2]
+    dx = films[3]
+    dy = films[4]
     npix = base[0].shape[0]
     n = pix.shape[0]
     for part in prange(parts):
