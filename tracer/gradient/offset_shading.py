@@ -288,6 +288,11 @@ def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
                 for c in range(3):
                     n_cn[i, c] = b[c] * fb[c] * lel[c] / pll
                 zl = (x[0] + dist * wl[0], x[1] + dist * wl[1], x[2] + dist * wl[2])
+                # A connected offset sits at the base's vertex and arrived along the base's ray: its f
+                # and density of the light's direction are the base's, which light_sample_at evaluated
+                # where the light gives anything (and without a guide, whose map the offset would look
+                # up for itself: shift.path_density)
+                same_nee = gs.res[0] == 0 and (lel[0] > 0.0 or lel[1] > 0.0 or lel[2] > 0.0)
                 rough_z = lt_tri < 0 or is_rough(surf, surf.material[lt_tri], roughness)
                 for o in range(4 if not near else 0):
                     if not o_alive[i, o]:
@@ -311,7 +316,6 @@ def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
                         ngy = (surf.normal[py, 0], surf.normal[py, 1], surf.normal[py, 2])
                         sfy = surface_at_point(surf, py, y)
                     wo_y = (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2])
-                    wo_o = to_local(wo_y, sfy.s, sfy.t, sfy.ns)
                     wlo = wl
                     disto = dist
                     jl = 1.0
@@ -332,12 +336,17 @@ def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
                         if not disto > 0.0:
                             n_mode[i, o] = NEE_BASE_ALONE
                             continue
-                    wil = to_local(wlo, sfy.s, sfy.t, sfy.ns)
-                    fo = bsdfs.bsdf_eval(sfy.bp, wo_o, wil, True, surf.mat_table)
-                    if crosses(sfy, dot(wo_y, ngy), ngy, wo_o, wil, wlo):
-                        fo = (0.0, 0.0, 0.0)
-                    n_pbo[i, o] = 0.0 if lt_tri < LIGHT_ENV else path_density(
-                        gs, sfy.bp, y, ngy, wo_y, wlo, bsdfs.bsdf_pdf(sfy.bp, wo_o, wil, surf.mat_table), False)
+                    if st == CONNECTED and same_nee:  # the base's own vertex, directions and density
+                        fo = fb
+                        n_pbo[i, o] = pbb
+                    else:
+                        wo_o = to_local(wo_y, sfy.s, sfy.t, sfy.ns)
+                        wil = to_local(wlo, sfy.s, sfy.t, sfy.ns)
+                        fo = bsdfs.bsdf_eval(sfy.bp, wo_o, wil, True, surf.mat_table)
+                        if crosses(sfy, dot(wo_y, ngy), ngy, wo_o, wil, wlo):
+                            fo = (0.0, 0.0, 0.0)
+                        n_pbo[i, o] = 0.0 if lt_tri < LIGHT_ENV else path_density(
+                            gs, sfy.bp, y, ngy, wo_y, wlo, bsdfs.bsdf_pdf(sfy.bp, wo_o, wil, surf.mat_table), False)
                     n_plo[i, o] = plo
                     n_rj[i, o] = o_R[i, o] * jl
                     for c in range(3):
