@@ -294,6 +294,24 @@ def _occluded(fn, scene, centre, org, dirs, tmax, scratch, out):
                 out[base + k] = lane_occluded(buf, ib, k)
 
 
+@jit
+def _fill_listed(buf, ib, lane, q, hi, idx, per, todo, org, dirs, tmax, centre):
+    """Fill the packet in scratch row `buf` (ib: the same row as int32) with the next flagged rows
+    from position q (below hi) of a listed query: row j = idx[q // per] * per + q % per where
+    todo[j], into lane[f] and packet lane f (left invalid where the ray is; tmax of none: inf).
+    Returns (the position after the last row taken, lanes filled)."""
+    clear_packet(ib)
+    f = 0
+    while q < hi and f < _LANES:
+        j = idx[q // per] * per + q % per
+        q += 1
+        if todo[j]:
+            lane[f] = j
+            load_lane(buf, ib, f, org, dirs, j, centre, tmax[j] if tmax.shape[0] > 0 else np.inf)
+            f += 1
+    return q, f
+
+
 @kernel
 def intersect_listed(fn, scene, plane, centre, refine, scratch, idx, per, rays, hits):
     """Closest hits of the flagged rays of rows: ray j = idx[a] * per + o (a over idx, o in
@@ -308,36 +326,27 @@ def intersect_listed(fn, scene, plane, centre, refine, scratch, idx, per, rays, 
     prim = hits[1]
     b1 = hits[2]
     b2 = hits[3]
-    L = _LANES
     nch = scratch.shape[0]
     nq = idx.shape[0] * per
     flagged = 0
     for c in prange(nch):
         buf = scratch[c]
         ib = buf.view(np.int32)
-        addr = buf.ctypes.data
-        lane = np.empty(L, np.int64)
-        f = 0
+        lane = np.empty(_LANES, np.int64)
+        q = c * nq // nch
         hi = (c + 1) * nq // nch
-        for q in range(c * nq // nch, hi + 1):
-            if q < hi:
-                j = idx[q // per] * per + q % per
-                if todo[j]:
-                    flagged += 1
-                    t[j] = np.inf
-                    prim[j] = -1
-                    b1[j] = 0.0
-                    b2[j] = 0.0
-                    if f == 0:
-                        clear_packet(ib)
-                    if load_lane(buf, ib, f, org, dirs, j, centre, np.inf):
-                        lane[f] = j
-                        f += 1
-            if f == L or (q == hi and f > 0):
-                call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
-                for k in range(f):
-                    read_hit(buf, ib, k, refine, plane, org, dirs, t, prim, b1, b2, lane[k])
-                f = 0
+        while q < hi:
+            q, f = _fill_listed(buf, ib, lane, q, hi, idx, per, todo, org, dirs, t[:0], centre)
+            if f > 0:
+                call4(fn, buf.ctypes.data + 4 * _VALID * _LANES, scene, buf.ctypes.data, 0)
+            for k in range(f):
+                j = lane[k]
+                t[j] = np.inf
+                prim[j] = -1
+                b1[j] = 0.0
+                b2[j] = 0.0
+                read_hit(buf, ib, k, refine, plane, org, dirs, t, prim, b1, b2, j)
+            flagged += f
     return flagged
 
 
@@ -351,37 +360,25 @@ def occluded_listed(fn, scene, centre, scratch, idx, per, rays, out, on_blocked,
     org = rays[1]
     dirs = rays[2]
     tmax = rays[3]
-    L = _LANES
     nch = scratch.shape[0]
     nq = idx.shape[0] * per
     flagged = 0
     for c in prange(nch):
         buf = scratch[c]
         ib = buf.view(np.int32)
-        addr = buf.ctypes.data
-        lane = np.empty(L, np.int64)
-        f = 0
+        lane = np.empty(_LANES, np.int64)
+        q = c * nq // nch
         hi = (c + 1) * nq // nch
-        for q in range(c * nq // nch, hi + 1):
-            if q < hi:
-                j = idx[q // per] * per + q % per
-                if todo[j]:
-                    flagged += 1
-                    if f == 0:
-                        clear_packet(ib)
-                    if load_lane(buf, ib, f, org, dirs, j, centre, tmax[j]):
-                        lane[f] = j
-                        f += 1
-                    elif not keep_clear:
-                        out[j] = on_clear
-            if f == L or (q == hi and f > 0):
-                call4(fn, addr + 4 * _VALID * L, scene, addr, 0)
-                for k in range(f):
-                    if lane_occluded(buf, ib, k):
-                        out[lane[k]] = on_blocked
-                    elif not keep_clear:
-                        out[lane[k]] = on_clear
-                f = 0
+        while q < hi:
+            q, f = _fill_listed(buf, ib, lane, q, hi, idx, per, todo, org, dirs, tmax, centre)
+            if f > 0:
+                call4(fn, buf.ctypes.data + 4 * _VALID * _LANES, scene, buf.ctypes.data, 0)
+            for k in range(f):
+                if lane_occluded(buf, ib, k):
+                    out[lane[k]] = on_blocked
+                elif not keep_clear:
+                    out[lane[k]] = on_clear
+            flagged += f
     return flagged
 
 
