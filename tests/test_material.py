@@ -3,16 +3,18 @@
 Checked against what the test computes itself: the texture image decoded from sRGB and filtered
 bilinearly with NumPy, the analytic normal field of a sphere, the glTF meaning of the PBR
 statements."""
+import importlib
 import json
 import math
-import os
 
 import numpy as np
 import pytest
+from numba import njit
 
 import tracer
 from tracer import bsdfs
 from tracer.camera import camera_ray
+from tracer.material import SURFACE_COLS, costly_surfaces, keep_surface, kept_surface, surface_at
 
 W = H = 16
 
@@ -373,3 +375,61 @@ def test_sidecar_makes_a_coated_material_and_glass_drops_opacity(tmp_path):
     (tmp_path / "q.json").write_text(json.dumps(side))
     with pytest.raises(SceneError, match="opacity must be in"):
         tracer.load_scene(obj)
+
+
+@njit(cache=True)
+def _kept_and_evaluated(surf, p, b1, b2):
+    """Per point: surface_at's Surface and the one keep_surface / kept_surface give back, flat."""
+    n = p.shape[0]
+    rows = np.zeros((n, SURFACE_COLS))
+    out = np.zeros((2, n, 30))
+    for k in range(n):
+        sf = surface_at(surf, p[k], b1[k], b2[k])
+        keep_surface(rows, k, sf)
+        for j, s in enumerate((sf, kept_surface(surf, rows, k, p[k]))):
+            out[j, k, 0] = s.bp[0]
+            for c in range(17):
+                out[j, k, 1 + c] = s.bp[1][c]
+            for c in range(3):
+                out[j, k, 18 + c] = s.ns[c]
+                out[j, k, 21 + c] = s.s[c]
+                out[j, k, 24 + c] = s.t[c]
+            out[j, k, 27] = s.uv[0]
+            out[j, k, 28] = s.uv[1]
+            out[j, k, 29] = 1.0 if s.smooth else 0.0
+    return out
+
+
+def test_a_kept_surface_is_the_evaluated_one_bit_for_bit(tmp_path):
+    """keep_surface / kept_surface (what gpt's offsets keep from one bounce to the next instead of
+    evaluating a Surface twice) against surface_at itself, at 64 random points of a quad with a
+    diffuse texture, a bump map, an opacity map and tilted vertex normals, and of an untextured
+    plastic: every field equal bit for bit. The textured fields vary over the points, so a kept
+    surface that fell back to the material's table row, dropped the bump, the clearness or the
+    smooth flag, or rebuilt a frame other than surface_at's would fail."""
+    rng = np.random.default_rng(5)
+    _write_png(tmp_path / "tex.png", rng.integers(0, 256, size=(8, 8, 3), dtype=np.uint8))
+    obj = ["mtllib q.mtl", "v -1 -1 0", "v 1 -1 0", "v 1 1 0", "v -1 1 0",
+           "vt 0 0", "vt 1 0", "vt 1 1", "vt 0 1", "vn 0.3 0 1", "vn 0 0.4 1", "vn -0.2 -0.1 1", "vn 0.1 0.2 1",
+           "usemtl tex", "f 1/1/1 2/2/2 3/3/3", "usemtl glossy", "f 1/1/1 3/3/3 4/4/4"]
+    (tmp_path / "q.obj").write_text("\n".join(obj) + "\n")
+    (tmp_path / "q.mtl").write_text("newmtl tex\nKd 0.5 0.5 0.5\nmap_Kd tex.png\nbump -bm 0.05 tex.png\n"
+                                    "map_d tex.png\nnewmtl glossy\nKd 0.3 0.2 0.1\nKs 0.4 0.4 0.4\nNs 200\n")
+    (tmp_path / "q.json").write_text(json.dumps({
+        "camera": {"origin": [0, 0, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 30},
+        "film": {"width": W, "height": H}, "environment": {"radiance": [1, 1, 1]}}))
+    scene = tracer.load_scene(str(tmp_path / "q.obj"))
+    surf = importlib.import_module("tracer.render").make_context(scene).surfaces
+    assert costly_surfaces(surf)
+    n = 64
+    p = np.arange(n) % 2
+    b1, b2 = rng.random(n), rng.random(n)
+    flip = b1 + b2 > 1.0
+    b1[flip], b2[flip] = 1.0 - b1[flip], 1.0 - b2[flip]
+    evaluated, kept = _kept_and_evaluated(surf, p, b1, b2)
+    assert np.array_equal(evaluated, kept)
+    tex = evaluated[surf.mat_tex[surf.material[p], 0] >= 0]
+    assert len(tex) == n // 2
+    for col in (1, 16 + 1, 18, 21):  # kd, clearness, the bumped normal and its frame vary over the quad
+        assert np.ptp(tex[:, col]) > 1e-3, col
+    assert evaluated[:, 29].all()  # smooth: vertex normals

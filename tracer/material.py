@@ -268,6 +268,43 @@ def surface_at(surf, p, b1, b2):
     return Surface(bp, ns, s, tt, uv, smooth)
 
 
+SURFACE_COLS = 13  # a kept Surface's floats: kd, ks, clear, ns, uv, smooth (keep_surface)
+
+
+@jit
+def costly_surfaces(surf):
+    """Whether a Surface costs more to evaluate than to keep (vertex normals or textures)."""
+    return surf.vn.shape[0] > 0 or surf.tex_info.shape[0] > 0
+
+
+@jit
+def keep_surface(rows, i, sf):
+    """Keep in row i of rows (n, SURFACE_COLS) float64 what Surface sf holds beyond its material's
+    table row: the (textured) reflectances and clearness, the shading normal, uv, smooth."""
+    prm = sf.bp[1]
+    for c in range(3):
+        rows[i, c] = prm[c]
+        rows[i, 3 + c] = prm[3 + c]
+        rows[i, 7 + c] = sf.ns[c]
+    rows[i, 6] = prm[16]
+    rows[i, 10] = sf.uv[0]
+    rows[i, 11] = sf.uv[1]
+    rows[i, 12] = 1.0 if sf.smooth else 0.0
+
+
+@jit
+def kept_surface(surf, rows, i, p):
+    """The Surface of triangle p that keep_surface kept in row i, bit for bit as surface_at gave it."""
+    r = rows[i]
+    m = surf.material[p]
+    q = surf.mat_param
+    bp = (surf.mat_type[m], (r[0], r[1], r[2], r[3], r[4], r[5], q[m, 6], q[m, 7], q[m, 8], q[m, 9], q[m, 10],
+                             q[m, 11], q[m, 12], q[m, 13], q[m, 14], q[m, 15], r[6]))
+    ns = (r[7], r[8], r[9])
+    s, t = frame(ns)
+    return Surface(bp, ns, s, t, (r[10], r[11]), r[12] != 0.0)
+
+
 @jit
 def barycentrics(tri, p, x):
     """(b1, b2) of the point x on triangle p's plane (the inverse of sampling.triangle_point)."""

@@ -15,7 +15,7 @@ from ..lights import (ENV_NONE, LIGHT_ENV, delta_arrival, delta_light_of, env_pd
                       triangle_light_pdf)
 from ..guiding.contract import locate
 from ..rng import LIGHT, LIGHT_POS, RR, bounce_dim, draw
-from ..material import crosses, surface_at, surface_at_point
+from ..material import costly_surfaces, crosses, keep_surface, surface_at, surface_at_point
 from ..sampling import dot, to_local, triangle_point
 from ..shading import emitted_env, emitted_surface, light_sample_at, next_bounce, offset_point, survival
 from ..shading import shadow_ray, write_aovs, write_shadow
@@ -101,6 +101,7 @@ def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
     b_delta = bb.delta
     b_rough = bb.rough
     b_direct = bb.direct
+    b_sf = bb.sf
     o_alive = off.alive
     o_status = off.status
     o_beta = off.beta
@@ -124,6 +125,8 @@ def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
     o_sh_o = off.sh_o
     o_sh_d = off.sh_d
     o_sh_tmax = off.sh_tmax
+    o_sf = off.sf
+    o_kept = off.kept
     n_cn = nt.cn
     n_pl = nt.pl
     n_pb = nt.pb
@@ -134,6 +137,7 @@ def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
     n_pbo = nt.pbo
     vis = nt.vis
     n_direct = nt.direct
+    keeps = costly_surfaces(surf)  # keep the Surfaces that shift_offsets needs at the next bounce
     for k in prange(active.shape[0]):
         i = active[k]
         alive[k] = False
@@ -145,6 +149,7 @@ def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
         p = prim[k]
         for o in range(4):
             o_sh[i, o] = False
+            o_kept[i, o] = False
             vis[i, o] = False
             n_mode[i, o] = NEE_NONE
         if dk == 0:
@@ -315,6 +320,9 @@ def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
                         y = (o_x[i, o, 0], o_x[i, o, 1], o_x[i, o, 2])
                         ngy = (surf.normal[py, 0], surf.normal[py, 1], surf.normal[py, 2])
                         sfy = surface_at_point(surf, py, y)
+                        if keeps:  # for shift_offsets at the next bounce
+                            keep_surface(o_sf, 4 * i + o, sfy)
+                            o_kept[i, o] = True
                     wo_y = (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2])
                     wlo = wl
                     disto = dist
@@ -395,6 +403,8 @@ def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
                 o_beta[i, o, c] /= q
         b_prim[i] = p
         b_pdf[i] = pdf
+        if keeps:
+            keep_surface(b_sf, i, sf)
         b_delta[i] = dlt
         b_rough[i] = rough and not dlt
         gain[i] = gn

@@ -12,7 +12,7 @@ from .. import bsdfs
 from .._jit import jit, kernel
 from ..camera import camera_ray
 from ..rng import DIM_PIXEL, draw
-from ..material import crosses, surface_at_point
+from ..material import SURFACE_COLS, costly_surfaces, crosses, kept_surface, surface_at_point
 from ..sampling import dot, to_local, to_world, triangle_point
 from ..shading import offset_point
 from .shift import half_vector_shift, is_rough, path_density, reconnection
@@ -34,6 +34,8 @@ class BaseBounce(NamedTuple):
     delta: np.ndarray  # (n,) bool sampled from a delta lobe
     rough: np.ndarray  # (n,) bool x_i is rough (and the lobe not delta)
     direct: np.ndarray  # (n,) bool the first vertex is near-specular: the light it reflects is direct light
+    sf: np.ndarray  # (n, material.SURFACE_COLS) float64 the Surface at x_i (material.keep_surface), where
+    # material.costly_surfaces
 
 
 class Offsets(NamedTuple):
@@ -67,6 +69,8 @@ class Offsets(NamedTuple):
     sh_o: np.ndarray  # (n, 4, 3) float64
     sh_d: np.ndarray  # (n, 4, 3) float64
     sh_tmax: np.ndarray  # (n, 4) float64
+    sf: np.ndarray  # (4 n, material.SURFACE_COLS) float64 row 4 i + o: the Surface at its vertex, where kept
+    kept: np.ndarray  # (n, 4) bool shade_hybrid evaluated that Surface at this vertex (its NEE) and kept it
 
 
 class NeeTerms(NamedTuple):
@@ -98,6 +102,7 @@ class HybridBuffers:
         self.b_prim = z(d=np.int64)
         self.b_pdf = z()
         self.b_delta, self.b_rough, self.b_direct = z(d=np.bool_), z(d=np.bool_), z(d=np.bool_)
+        self.b_sf = z(SURFACE_COLS)
         # NEE terms, weighted once the shadow rays are known: the base's value, light and BSDF
         # densities; per offset a mode (offset_shading.NEE_*), value, R J_L, light and BSDF densities,
         # and the visibility of its own ray
@@ -117,6 +122,8 @@ class HybridBuffers:
         self.hit_t, self.hit_b1, self.hit_b2 = z(4), z(4), z(4)
         self.hit_prim = z(4, d=np.int64)
         self.sh_o, self.sh_d, self.sh_tmax = z(4, 3), z(4, 3), z(4)
+        self.o_sf = np.zeros((4 * size, SURFACE_COLS))
+        self.kept = z(4, d=np.bool_)
 
     @staticmethod
     def bytes_for(size):
@@ -125,13 +132,13 @@ class HybridBuffers:
 
     def base(self):
         return BaseBounce(self.b_x, self.b_prim, self.b_wo, self.b_wt, self.b_pdf, self.b_delta, self.b_rough,
-                          self.b_direct)
+                          self.b_direct, self.b_sf)
 
     def offsets(self):
         return Offsets(self.alive, self.status, self.beta, self.R, self.x, self.prim, self.wo, self.pdf, self.delta,
                        self.dist2, self.rough, self.hv, self.lights, self.trace, self.reconn, self.ray_o, self.ray_d,
                        self.tmax, self.G, self.hit_t, self.hit_prim, self.hit_b1, self.hit_b2, self.sh, self.sh_o,
-                       self.sh_d, self.sh_tmax)
+                       self.sh_d, self.sh_tmax, self.o_sf, self.kept)
 
     def nee_terms(self):
         return NeeTerms(self.n_cn, self.n_pl, self.n_pb, self.vis_b, self.n_mode, self.n_co, self.n_rj, self.n_plo,
@@ -215,6 +222,7 @@ def shift_offsets(active, hits, ray_d, surf, gs, roughness, bb, off):
     b_pdf = bb.pdf
     b_delta = bb.delta
     b_rough = bb.rough
+    b_sf = bb.sf
     o_alive = off.alive
     o_status = off.status
     o_beta = off.beta
@@ -233,6 +241,9 @@ def shift_offsets(active, hits, ray_d, surf, gs, roughness, bb, off):
     o_ray_o = off.ray_o
     o_ray_d = off.ray_d
     o_tmax = off.tmax
+    o_sf = off.sf
+    o_kept = off.kept
+    keeps = costly_surfaces(surf)
     for k in prange(active.shape[0]):
         i = active[k]
         p1 = prim[k]
@@ -244,7 +255,7 @@ def shift_offsets(active, hits, ray_d, surf, gs, roughness, bb, off):
         wib_w = (ray_d[k, 0], ray_d[k, 1], ray_d[k, 2])
         px = b_prim[i]
         xb = (b_x[i, 0], b_x[i, 1], b_x[i, 2])
-        sfx = surface_at_point(surf, px, xb)
+        sfx = kept_surface(surf, b_sf, i, px) if keeps else surface_at_point(surf, px, xb)  # (shade_hybrid's)
         ngx = (surf.normal[px, 0], surf.normal[px, 1], surf.normal[px, 2])
         wi_b = to_local(wib_w, sfx.s, sfx.t, sfx.ns)
         wo_b = to_local((b_wo[i, 0], b_wo[i, 1], b_wo[i, 2]), sfx.s, sfx.t, sfx.ns)
@@ -281,7 +292,7 @@ def shift_offsets(active, hits, ray_d, surf, gs, roughness, bb, off):
                 continue
             py = o_prim[i, o]
             y = (o_x[i, o, 0], o_x[i, o, 1], o_x[i, o, 2])
-            sfy = surface_at_point(surf, py, y)
+            sfy = kept_surface(surf, o_sf, 4 * i + o, py) if o_kept[i, o] else surface_at_point(surf, py, y)
             ngy = (surf.normal[py, 0], surf.normal[py, 1], surf.normal[py, 2])
             wo_y = (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2])
             wo_o = to_local(wo_y, sfy.s, sfy.t, sfy.ns)
