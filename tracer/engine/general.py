@@ -6,7 +6,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import kernel
-from ..guiding.records import RECORD_NONE, record_emission, record_sampled, record_vectors, vertex_record
+from ..guiding.records import RECORD_NONE, record_vertex
 from .rows import ALIVE, BR, DELTA, DEPTH, DX, DY, DZ, LR, OX, PDF, SDX, SHADOW, SLOT, SOX, SR, TMAX
 from .vertex import shade_vertex
 
@@ -39,21 +39,7 @@ def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, p
     aov = state.aov
     aov_open = state.aov_open
     prev_rec = state.prev_rec
-    r_x = rec.x
-    r_n = rec.n
-    r_wi = rec.wi
-    r_pdf = rec.pdf
-    r_fcos = rec.fcos
     r_strategy = rec.strategy
-    r_node = rec.node
-    r_path = rec.path
-    r_pixel = rec.pixel
-    r_L0 = rec.L0
-    r_beta = rec.beta
-    r_pb = rec.pb
-    r_prev = rec.prev
-    r_direct = rec.direct
-    r_plight = rec.plight
     for j in prange(general.shape[0]):
         k = general[j]
         i = li[SLOT, k]
@@ -88,12 +74,6 @@ def shade_general(lf, li, hit, prim, sh, flags, general, centre, surf, lt, gs, p
                 sh[SR + q, k] = v.sh_L[q]
             sh[TMAX, k] = v.sh_tmax
         if record != RECORD_NONE:
-            if v.found and prev_rec[i] >= 0:
-                record_emission(prev_rec[i], record, v.b, v.le, v.w, v.pdf, r_L0, r_direct, r_plight)
-            if v.sampled:
-                vx = vertex_record(v, L, i)
-                if record_sampled(i, rec_base + k, vx, prev_rec, pix, r_prev, r_strategy, r_node, r_path,
-                                  r_pixel, r_pdf, r_pb, r_fcos, r_direct, r_plight):
-                    record_vectors(rec_base + k, vx, r_x, r_n, r_wi, r_L0, r_beta)
+            record_vertex(v, L, i, rec_base + k, record, prev_rec, pix, rec)
 
 

@@ -136,3 +136,33 @@ def vertex_record(v, L, i):
     """record_sampled's vx from the engine.vertex.Vertex v of path slot i (L0: its radiance L[i])."""
     return (v.recorded, v.x, v.nf, v.wi, v.strategy, v.node, v.pdf_mix, v.pdf_bsdf, v.fcos, v.beta,
             (L[i, 0], L[i, 1], L[i, 2]))
+
+
+@jit
+def record_vertex(v, L, i, r, record, prev_rec, pix, rec):
+    """Write the records of path slot i's vertex, shaded by shade_vertex as v (engine.vertex.Vertex),
+    as record r of Records rec: the emission it found into its path's last record, and the vertex
+    itself where it sampled a direction. Called, not inlined: a parallel loop keeps the writes of a
+    called function through a tuple of arrays (tests/test_seams.py), not of an inlined one."""
+    r_L0 = rec.L0
+    r_direct = rec.direct
+    r_plight = rec.plight
+    if v.found and prev_rec[i] >= 0:
+        record_emission(prev_rec[i], record, v.b, v.le, v.w, v.pdf, r_L0, r_direct, r_plight)
+    if v.sampled:
+        vx = vertex_record(v, L, i)
+        r_prev = rec.prev
+        r_strategy = rec.strategy
+        r_node = rec.node
+        r_path = rec.path
+        r_pixel = rec.pixel
+        r_pdf = rec.pdf
+        r_pb = rec.pb
+        r_fcos = rec.fcos
+        if record_sampled(i, r, vx, prev_rec, pix, r_prev, r_strategy, r_node, r_path, r_pixel, r_pdf, r_pb, r_fcos,
+                          r_direct, r_plight):
+            r_x = rec.x
+            r_n = rec.n
+            r_wi = rec.wi
+            r_beta = rec.beta
+            record_vectors(r, vx, r_x, r_n, r_wi, r_L0, r_beta)

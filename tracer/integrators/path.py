@@ -42,8 +42,7 @@ from numba import prange
 from .._jit import kernel
 from ..engine.vertex import MAX_BOUNCES, shade_vertex
 from ..film import aovs_of, combine_films
-from ..guiding.records import (RECORD_ALL, RECORD_INDIRECT, RECORD_NONE, finalize_records, record_emission,
-                               record_sampled, record_vectors, vertex_record)
+from ..guiding.records import RECORD_ALL, RECORD_INDIRECT, RECORD_NONE, finalize_records, record_vertex
 from ..shading import write_shadow
 from ..splitting import merge_copies, split_wave
 from ..result import RenderResult, report_dark
@@ -104,21 +103,7 @@ def shade(active, ray_o, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
     sh_tmax = shr.tmax
     sh_L = shr.L
     has_shadow = shr.has
-    r_x = rec.x
-    r_n = rec.n
-    r_wi = rec.wi
-    r_pdf = rec.pdf
-    r_fcos = rec.fcos
     r_strategy = rec.strategy
-    r_node = rec.node
-    r_path = rec.path
-    r_pixel = rec.pixel
-    r_L0 = rec.L0
-    r_beta = rec.beta
-    r_pb = rec.pb
-    r_prev = rec.prev
-    r_direct = rec.direct
-    r_plight = rec.plight
     for k in prange(active.shape[0]):
         i = active[k]
         if record != RECORD_NONE:
@@ -135,13 +120,7 @@ def shade(active, ray_o, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
                 next_o[k, c] = v.next_o[c]
                 next_d[k, c] = v.next_d[c]
         if record != RECORD_NONE:
-            if v.found and prev_rec[i] >= 0:
-                record_emission(prev_rec[i], record, v.b, v.le, v.w, v.pdf, r_L0, r_direct, r_plight)
-            if v.sampled:
-                vx = vertex_record(v, L, i)
-                if record_sampled(i, rec_base + k, vx, prev_rec, pix, r_prev, r_strategy, r_node, r_path,
-                                  r_pixel, r_pdf, r_pb, r_fcos, r_direct, r_plight):
-                    record_vectors(rec_base + k, vx, r_x, r_n, r_wi, r_L0, r_beta)
+            record_vertex(v, L, i, rec_base + k, record, prev_rec, pix, rec)
 
 
 def warm_up_shadows(ctx):
