@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._jit import jit
-from .bsdfs import bsdf_at
+from .bsdfs import P_CLEAR, P_KD, P_KS, bsdf_at
 from .sampling import dot, frame
 
 TEX_CONSTANT, TEX_BITMAP, TEX_CHECKER = 0, 1, 2
@@ -253,6 +253,7 @@ def surface_at(surf, p, b1, b2):
         if surf.mat_tex[m, TEX_SLOT_OPACITY] >= 0:
             op = _lum(texture_eval(surf.tex_info, surf.tex_data, surf.mat_tex[m, TEX_SLOT_OPACITY], uv[0], uv[1]))
             clear = 1.0 - min(max(op, 0.0), 1.0)
+        # (keep_surface keeps exactly these textured params: kd, ks, clear)
         bp = (t, (kd[0], kd[1], kd[2], ks[0], ks[1], ks[2], prm[6], prm[7], prm[8], prm[9], prm[10], prm[11],
                   prm[12], prm[13], prm[14], prm[15], clear))
     ns = shading_normal(surf, p, b1, b2, ng)
@@ -283,10 +284,10 @@ def keep_surface(rows, i, sf):
     table row: the (textured) reflectances and clearness, the shading normal, uv, smooth."""
     prm = sf.bp[1]
     for c in range(3):
-        rows[i, c] = prm[c]
-        rows[i, 3 + c] = prm[3 + c]
+        rows[i, c] = prm[P_KD + c]
+        rows[i, 3 + c] = prm[P_KS + c]
         rows[i, 7 + c] = sf.ns[c]
-    rows[i, 6] = prm[16]
+    rows[i, 6] = prm[P_CLEAR]
     rows[i, 10] = sf.uv[0]
     rows[i, 11] = sf.uv[1]
     rows[i, 12] = 1.0 if sf.smooth else 0.0
@@ -298,6 +299,8 @@ def kept_surface(surf, rows, i, p):
     r = rows[i]
     m = surf.material[p]
     q = surf.mat_param
+    # params P_KD .. P_KS + 2 and P_CLEAR (the ones surface_at's textures replace) from the row, the
+    # rest from the material's table
     bp = (surf.mat_type[m], (r[0], r[1], r[2], r[3], r[4], r[5], q[m, 6], q[m, 7], q[m, 8], q[m, 9], q[m, 10],
                              q[m, 11], q[m, 12], q[m, 13], q[m, 14], q[m, 15], r[6]))
     ns = (r[7], r[8], r[9])
