@@ -789,6 +789,17 @@ def bsdf_pdf(bp, wo, wi, table):
     return _pdf_opaque(bp, wo, wi, table)
 
 
+@jit(inline="always")
+def bsdf_eval_pdf(bp, wo, wi, radiance, table):
+    """(bsdf_eval, bsdf_pdf) of one pair of directions, the same values bit for bit, with a
+    glossy lobe's work (its microfacet terms, a coat's table lookups) done once for both."""
+    f, pdf = _eval_pdf_opaque(bp, wo, wi, radiance, table)
+    c = bp[1][16]
+    if c > 0.0:
+        return _scale3(f, 1.0 - c), pdf * (1.0 - c)
+    return f, pdf
+
+
 @jit
 def delta_lobe(bp, wo, transmit, radiance):
     """The delta lobe of material m that reflects wo (transmit False) or refracts it (True), as
@@ -897,6 +908,28 @@ def _pdf_opaque(bp, wo, wi, table):
         _, pdf = _coated_eval_pdf(prm, table, wo, wi)
         return pdf
     return 0.0
+
+
+@jit
+def _eval_pdf_opaque(bp, wo, wi, radiance, table):
+    """(_eval_opaque, _pdf_opaque) in one call."""
+    t, prm = bp[0], bp[1]
+    if prm[14] != 0.0 and int(prm[14]) & ONE_SIDED and wo[2] <= 0.0:
+        return _ZERO3, 0.0
+    if t == DIFFUSE:
+        return _diffuse_eval(_kd(prm), wo, wi), _diffuse_pdf(wo, wi)
+    if t == CONDUCTOR:
+        return _conductor_eval(_ks(prm), _alpha(prm), wo, wi), _microfacet_reflection_pdf(_alpha(prm), wo, wi)
+    if t == ROUGH_DIELECTRIC:
+        fcos, pdf = _rough_dielectric_eval_pdf(_alpha(prm), prm[7], wo, wi, radiance)
+        return (fcos, fcos, fcos), pdf
+    if t == PLASTIC:
+        return _plastic_eval_pdf(_kd(prm), _ks(prm), _alpha(prm), wo, wi)
+    if t == METAL:
+        return _metal_eval_pdf(prm, wo, wi)
+    if t == COATED:
+        return _coated_eval_pdf(prm, table, wo, wi)
+    return _ZERO3, 0.0
 
 
 @jit
@@ -1032,6 +1065,11 @@ def pdf_batch(mat_type, mat_param, m, wo, wi, mat_table=None):
     return _pdf_batch(*_table(mat_type, mat_param, mat_table), m, wo, wi)
 
 
+def eval_pdf_batch(mat_type, mat_param, m, wo, wi, radiance, mat_table=None):
+    """`bsdf_eval_pdf` over a batch: wo, wi (n, 3) float64 local -> (f |cos wi| (n, 3), pdf (n,))."""
+    return _eval_pdf_batch(*_table(mat_type, mat_param, mat_table), m, wo, wi, radiance)
+
+
 @kernel
 def _sample_batch(mat_type, mat_param, mat_table, m, wo, u, radiance):
     n = wo.shape[0]
@@ -1064,6 +1102,21 @@ def _eval_batch(mat_type, mat_param, mat_table, m, wo, wi, radiance):
         for c in range(3):
             out[k, c] = f[c]
     return out
+
+
+@kernel
+def _eval_pdf_batch(mat_type, mat_param, mat_table, m, wo, wi, radiance):
+    n = wo.shape[0]
+    out = np.empty((n, 3))
+    pdf = np.empty(n)
+    for k in prange(n):
+        f, pdf[k] = bsdf_eval_pdf(
+            bsdf_at(mat_type, mat_param, m), (wo[k, 0], wo[k, 1], wo[k, 2]),
+            (wi[k, 0], wi[k, 1], wi[k, 2]), radiance, mat_table,
+        )
+        for c in range(3):
+            out[k, c] = f[c]
+    return out, pdf
 
 
 @kernel

@@ -183,10 +183,10 @@ def light_sample_at(sf, lt, tri, x, ng, cos_o, wo, beta, gs, slot, a, eps, tri_e
     pb = 0.0
     if pl > 0.0 and (le[0] > 0.0 or le[1] > 0.0 or le[2] > 0.0):
         wil = to_local(wl, sf.s, sf.t, sf.ns)
-        f = bsdfs.bsdf_eval(sf.bp, wo, wil, True, table)
+        f, pbs = bsdfs.bsdf_eval_pdf(sf.bp, wo, wil, True, table)
         if crosses(sf, cos_o, ng, wo, wil, wl):
             f = BLACK
-        pb = mixture_pdf(gs, slot, a, bsdfs.bsdf_pdf(sf.bp, wo, wil, table), wl) if lt_tri >= LIGHT_ENV else 0.0
+        pb = mixture_pdf(gs, slot, a, pbs, wl) if lt_tri >= LIGHT_ENV else 0.0
         if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
             w = power_heuristic(pl, pb)
             so, sd, tmax = shadow_ray(x, ng, eps, wl, dist, lt, lt_tri, tri_eps)
@@ -237,10 +237,9 @@ def sample_mixture(sf, gs, slot, a, wo, ng, cos_o, u0, u1, u_lobe, u_strategy, t
     if a < 1.0 and u_strategy >= a:
         wiw, pg = slot_sample(gs, slot, u0, u1)
         wi = to_local(wiw, sf.s, sf.t, sf.ns)
-        f = bsdfs.bsdf_eval(sf.bp, wo, wi, True, table)
+        f, pbs = bsdfs.bsdf_eval_pdf(sf.bp, wo, wi, True, table)
         if crosses(sf, cos_o, ng, wo, wi, wiw):
             f = BLACK
-        pbs = bsdfs.bsdf_pdf(sf.bp, wo, wi, table)
         wt, pdf, ratio = guided_weight(f, pbs, pg, a)
         return wiw, wt, pdf, pbs, False, 1, ratio
     wi, wt, pdf, dlt = bsdfs.bsdf_sample(sf.bp, wo, u0, u1, u_lobe, True, table)

@@ -350,11 +350,11 @@ def shade_hybrid(active, ray_d, hits, surf, lt, gs, ps, limits, state, cont, shr
                     else:
                         wo_o = to_local(wo_y, sfy.s, sfy.t, sfy.ns)
                         wil = to_local(wlo, sfy.s, sfy.t, sfy.ns)
-                        fo = bsdfs.bsdf_eval(sfy.bp, wo_o, wil, True, surf.mat_table)
+                        fo, pbo = bsdfs.bsdf_eval_pdf(sfy.bp, wo_o, wil, True, surf.mat_table)
                         if crosses(sfy, dot(wo_y, ngy), ngy, wo_o, wil, wlo):
                             fo = (0.0, 0.0, 0.0)
                         n_pbo[i, o] = 0.0 if lt_tri < LIGHT_ENV else path_density(
-                            gs, sfy.bp, y, ngy, wo_y, wlo, bsdfs.bsdf_pdf(sfy.bp, wo_o, wil, surf.mat_table), False)
+                            gs, sfy.bp, y, ngy, wo_y, wlo, pbo, False)
                     n_plo[i, o] = plo
                     n_rj[i, o] = o_R[i, o] * jl
                     for c in range(3):

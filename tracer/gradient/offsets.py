@@ -276,10 +276,10 @@ def shift_offsets(active, hits, ray_d, surf, gs, roughness, bb, off):
             if st == RECENT:  # at x_i with its own incoming direction
                 wo_w = (o_wo[i, o, 0], o_wo[i, o, 1], o_wo[i, o, 2])
                 wo_o = to_local(wo_w, sfx.s, sfx.t, sfx.ns)
-                f = bsdfs.bsdf_eval(sfx.bp, wo_o, wi_b, True, surf.mat_table)
+                f, pbs = bsdfs.bsdf_eval_pdf(sfx.bp, wo_o, wi_b, True, surf.mat_table)
                 if crosses(sfx, dot(wo_w, ngx), ngx, wo_o, wi_b, wib_w):
                     f = (0.0, 0.0, 0.0)
-                po = path_density(gs, sfx.bp, xb, ngx, wo_w, wib_w, bsdfs.bsdf_pdf(sfx.bp, wo_o, wi_b, surf.mat_table), False)
+                po = path_density(gs, sfx.bp, xb, ngx, wo_w, wib_w, pbs, False)
                 if not po > 0.0:
                     o_alive[i, o] = False
                     continue
@@ -310,10 +310,10 @@ def shift_offsets(active, hits, ray_d, surf, gs, roughness, bb, off):
                         continue
                     d2 = dist * dist
                 wi_o = to_local(wn, sfy.s, sfy.t, sfy.ns)
-                f = bsdfs.bsdf_eval(sfy.bp, wo_o, wi_o, True, surf.mat_table)
+                f, pbs = bsdfs.bsdf_eval_pdf(sfy.bp, wo_o, wi_o, True, surf.mat_table)
                 if crosses(sfy, dot(wo_y, ngy), ngy, wo_o, wi_o, wn):
                     f = (0.0, 0.0, 0.0)
-                po = path_density(gs, sfy.bp, y, ngy, wo_y, wn, bsdfs.bsdf_pdf(sfy.bp, wo_o, wi_o, surf.mat_table), False)
+                po = path_density(gs, sfy.bp, y, ngy, wo_y, wn, pbs, False)
                 if not (po > 0.0 and math.isfinite(jac)):
                     o_alive[i, o] = False
                     continue

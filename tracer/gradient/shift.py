@@ -121,6 +121,5 @@ def half_vector_shift(bpx, bpy, wo_b, wi_b, wo_o, delta, table):
     if not den > 0.0 or (wo_o[2] * wi[2] < 0.0) != transmit:  # the offset's lobe must be the base's
         return False, zero, zero, 0.0, 0.0
     jac = et_b * et_b * abs(dot(wi_b, h)) * dot(ho, ho) / den
-    f = bsdfs.bsdf_eval(bpy, wo_o, wi, True, table)
-    pdf = bsdfs.bsdf_pdf(bpy, wo_o, wi, table)
+    f, pdf = bsdfs.bsdf_eval_pdf(bpy, wo_o, wi, True, table)
     return pdf > 0.0 and math.isfinite(jac), wi, f, pdf, jac

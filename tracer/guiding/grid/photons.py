@@ -304,8 +304,8 @@ def scatter(active, d, hits, surf, gs, data_slot, photons, limits, cont, dep, im
         if islot >= 0 and u2 < p_imp:
             wiw, pg = map_sample(imp.rowcum, imp.dens, imp.wsum, imp.pscale, islot, imp.n_theta, imp.n_phi, u0, u1)
             wi = to_local(wiw, s, tt, ns)
-            f = bsdfs.bsdf_eval(sf.bp, wo, wi, False, surf.mat_table)
-            pm = (1.0 - p_imp) * bsdfs.bsdf_pdf(sf.bp, wo, wi, surf.mat_table) + p_imp * pg
+            f, pbs = bsdfs.bsdf_eval_pdf(sf.bp, wo, wi, False, surf.mat_table)
+            pm = (1.0 - p_imp) * pbs + p_imp * pg
             wt = (0.0, 0.0, 0.0)
             if pm > 0.0:
                 wt = (f[0] / pm, f[1] / pm, f[2] / pm)
