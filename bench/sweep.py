@@ -76,8 +76,10 @@ def run(fn, cells, done, threads=1, scheduler=None, workers=None, progress=True,
         for c in cells:
             done(c, fn(c))
         return
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, as_completed
     from tqdm import tqdm
+
+    from tracer.distributed import local_cluster
 
     with contextlib.ExitStack() as stack:
         pin = scheduler is None
@@ -85,8 +87,8 @@ def run(fn, cells, done, threads=1, scheduler=None, workers=None, progress=True,
             n = min(workers or local_workers(threads), len(cells))
             pinned = n * threads <= (os.cpu_count() or 1)
             env = {WORKER_ENV: str(threads if pinned else 0), "OMP_NUM_THREADS": str(threads)}
-            cluster = stack.enter_context(LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                                       dashboard_address=None, silence_logs=40, env=env))
+            cluster = stack.enter_context(local_cluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                        dashboard_address=None, silence_logs=40, env=env))
             client = stack.enter_context(Client(cluster))
         else:
             client = stack.enter_context(Client(scheduler))

@@ -124,8 +124,10 @@ def _work(make, seed, path, threads):
 def run_shards(make, seeds, out_dir, workers=None, scheduler=None, threads_per_worker=1, progress=True):
     """Generate the missing shards of `seeds` into out_dir; returns {seed: seconds} of those run.
     `make(seed, path)` must be importable by the workers (a module-level function)."""
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, as_completed
     from tqdm import tqdm
+
+    from tracer.distributed import local_cluster
 
     os.makedirs(out_dir, exist_ok=True)
     todo = [int(s) for s in seeds if not os.path.exists(shard_path(out_dir, s))]
@@ -135,8 +137,8 @@ def run_shards(make, seeds, out_dir, workers=None, scheduler=None, threads_per_w
     with contextlib.ExitStack() as stack:
         if scheduler is None:
             n = workers or os.cpu_count() or 1
-            cluster = stack.enter_context(LocalCluster(n_workers=min(n, len(todo)), threads_per_worker=1,
-                                                       processes=True, dashboard_address=None, silence_logs=40))
+            cluster = stack.enter_context(local_cluster(n_workers=min(n, len(todo)), threads_per_worker=1,
+                                                        processes=True, dashboard_address=None, silence_logs=40))
             client = stack.enter_context(Client(cluster))
         else:
             client = stack.enter_context(Client(scheduler))

@@ -166,3 +166,18 @@ def test_ctrl_c_writes_the_merged_image_so_far(tmp_path):
     img = tracer.read_image(out)
     assert img.shape == (32, 32, 3) and np.isfinite(img).all() and img.mean() > 0
     assert not (tmp_path / "k.segments").exists()
+
+
+def test_local_cluster_workers_keep_this_process_malloc_settings():
+    """A worker of distributed.local_cluster has this process's MALLOC_TRIM_THRESHOLD_ (normally
+    none), not the 65536 Dask's nanny sets by default, which turns off glibc's dynamic mmap
+    threshold and made gpt-l1's solve 2.3x slower in a worker. Detects a cluster made without
+    local_cluster's setting (or a Dask release that sets it some other way)."""
+    pytest.importorskip("distributed")
+    from distributed import Client
+
+    own = os.environ.get("MALLOC_TRIM_THRESHOLD_")  # (a nanny sets it here too as it spawns a worker)
+    with distributed.local_cluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as c, \
+            Client(c) as client:
+        seen = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
+    assert list(seen.values()) == [own], seen
